@@ -1,0 +1,162 @@
+"""Two faces of the same elementary maths: numpy (vectorised) and CasADi (symbolic).
+
+Every model in :mod:`risk_env` is written once against an :class:`Ops` namespace, so the
+simulator, the env's risk report and the MPC's constraints evaluate the very same formulas.
+Both faces avoid evaluating singular expressions in an unused branch (``sin(a)/a`` at 0, ``acos``
+at 1), so values and gradients stay finite everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from scipy import special
+
+_SQRT2 = math.sqrt(2.0)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Ops:
+    """The elementary functions a model may use; ``xp`` names the backend."""
+
+    name: str
+    sin: Callable[[Any], Any]
+    cos: Callable[[Any], Any]
+    exp: Callable[[Any], Any]
+    sqrt: Callable[[Any], Any]
+    erf: Callable[[Any], Any]
+    asin: Callable[[Any], Any]
+    acos: Callable[[Any], Any]
+    atan2: Callable[[Any, Any], Any]
+    abs: Callable[[Any], Any]
+    floor: Callable[[Any], Any]
+    maximum: Callable[[Any, Any], Any]
+    minimum: Callable[[Any, Any], Any]
+    where: Callable[[Any, Any, Any], Any]
+
+    stack: Callable[[list[Any]], Any]
+    """Scalars (or batch arrays) -> a vector on a last axis (numpy) / a column (CasADi)."""
+    expand: Callable[[Any], Any]
+    """A batch scalar made to broadcast against such a vector."""
+    stack_vectors: Callable[[list[Any]], Any]
+    """Vectors joined end to end."""
+    sort: Callable[[Any], Any]
+    """Ascending sort of a vector."""
+    sum: Callable[[Any], Any]
+    """Sum over the vector axis."""
+    part: Callable[[Any, slice], Any]
+    """Entries of a vector: ``part(v, slice(1, None))``, or one entry as a batch scalar."""
+    repeat: Callable[[Any, int], Any]
+    """Each entry of a vector repeated ``k`` times in a row."""
+    const: Callable[[np.ndarray], Any]
+    """A constant numpy vector in this backend."""
+
+    def clip(self, x: Any, lo: Any, hi: Any) -> Any:
+        return self.minimum(self.maximum(x, lo), hi)
+
+    def sinc(self, a: Any) -> Any:
+        """sin(a)/a, smooth and exact through a = 0."""
+        small = self.abs(a) < 1e-4
+        a_safe = self.where(small, 1.0, a)
+        return self.where(small, 1.0 - a * a / 6.0, self.sin(a_safe) / a_safe)
+
+    def norm_cdf(self, z: Any) -> Any:
+        """Standard normal CDF Phi(z)."""
+        if self.name == "numpy":
+            return special.ndtr(z)
+        return 0.5 * (1.0 + self.erf(z / _SQRT2))
+
+    def norm_pdf(self, z: Any) -> Any:
+        """Standard normal density phi(z)."""
+        return _INV_SQRT_2PI * self.exp(-0.5 * z * z)
+
+    def wrap_angle(self, a: Any) -> Any:
+        """a wrapped to [-pi, pi)."""
+        return a - 2.0 * math.pi * self.floor((a + math.pi) / (2.0 * math.pi))
+
+
+def _np_where(c: Any, a: Any, b: Any) -> Any:
+    return np.where(c, a, b)
+
+
+def _np_stack(values: list[Any]) -> np.ndarray:
+    try:
+        return np.stack(values, axis=-1)
+    except ValueError:  # mixed batch shapes
+        return np.stack(np.broadcast_arrays(*values), axis=-1)
+
+
+def _np_join(vectors: list[np.ndarray]) -> np.ndarray:
+    """Vectors joined on the last axis, their batch shapes broadcast."""
+    try:
+        return np.concatenate(vectors, axis=-1)
+    except ValueError:
+        batch = np.broadcast_shapes(*(np.shape(v)[:-1] for v in vectors))
+        return np.concatenate([np.broadcast_to(v, batch + np.shape(v)[-1:]) for v in vectors], -1)
+
+
+def _ca_sort(v: Any) -> Any:
+    """Odd-even transposition network: smooth almost everywhere, n rounds of fmin/fmax."""
+    e = [v[i] for i in range(v.shape[0])]
+    n = len(e)
+    for i in range(n):
+        for j in range(i % 2, n - 1, 2):
+            e[j], e[j + 1] = ca.fmin(e[j], e[j + 1]), ca.fmax(e[j], e[j + 1])
+    return ca.vertcat(*e)
+
+
+NUMPY = Ops(
+    name="numpy",
+    sin=np.sin,
+    cos=np.cos,
+    exp=np.exp,
+    sqrt=np.sqrt,
+    erf=special.erf,
+    asin=np.arcsin,
+    acos=np.arccos,
+    atan2=np.arctan2,
+    abs=np.abs,
+    floor=np.floor,
+    maximum=np.maximum,
+    minimum=np.minimum,
+    where=_np_where,
+    stack=_np_stack,
+    stack_vectors=_np_join,
+    expand=lambda a: np.asarray(a)[..., None],
+    sort=lambda v: np.sort(v, axis=-1),
+    sum=lambda v: np.sum(v, axis=-1),
+    part=lambda v, s: v[..., s],
+    repeat=lambda v, k: np.repeat(v, k, axis=-1),
+    const=lambda c: c,
+)
+
+CASADI = Ops(
+    name="casadi",
+    sin=ca.sin,
+    cos=ca.cos,
+    exp=ca.exp,
+    sqrt=ca.sqrt,
+    erf=ca.erf,
+    asin=ca.asin,
+    acos=ca.acos,
+    atan2=ca.atan2,
+    abs=ca.fabs,
+    floor=ca.floor,
+    maximum=ca.fmax,
+    minimum=ca.fmin,
+    where=lambda c, a, b: ca.if_else(c, a, b),
+    stack=lambda values: ca.vertcat(*values),
+    stack_vectors=lambda vs: ca.vertcat(*vs),
+    expand=lambda a: a,
+    sort=_ca_sort,
+    sum=ca.sum1,
+    part=lambda v, s: v[s],
+    repeat=lambda v, k: ca.kron(v, ca.DM.ones(k, 1)),
+    const=ca.DM,
+)

@@ -1,0 +1,82 @@
+"""The reference path: point, heading, closest-point projection, timing law and path error.
+
+The arc of :class:`~risk_env.scenario.ReferencePath` is written in the goal's frame as
+``l_x = l sinc(kappa l)``, ``l_y = l (kappa l / 2) sinc(kappa l / 2)^2``, smooth for any kappa
+including 0, and defined for every arc length: beyond lambda_g it continues the arc, so an MPC
+horizon never runs off the path.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from risk_env.ops import NUMPY, Ops
+from risk_env.scenario import ReferencePath
+
+
+def point(path: ReferencePath, lam: Any, ops: Ops = NUMPY) -> tuple[Any, Any, Any]:
+    """``y_P(lambda)``: ``(c1 [m], c2 [m], theta_P [rad])`` at arc length ``lam`` [m]."""
+    k = path.curvature
+    a = k * lam
+    lx = lam * ops.sinc(a)
+    s = ops.sinc(0.5 * a)
+    ly = lam * 0.5 * a * s * s
+    g = path.goal
+    cg, sg = math.cos(g.theta), math.sin(g.theta)
+    return g.x + cg * lx - sg * ly, g.y + sg * lx + cg * ly, g.theta + a
+
+
+def project(path: ReferencePath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
+    """Arc length [m] of the closest point of the (continued) path to ``(x, y)`` [m]."""
+    g = path.goal
+    cg, sg = math.cos(g.theta), math.sin(g.theta)
+    px = cg * (x - g.x) + sg * (y - g.y)
+    py = -sg * (x - g.x) + cg * (y - g.y)
+    k = path.curvature
+    if k == 0.0:
+        return px
+    sign = 1.0 if k > 0 else -1.0
+    return ops.atan2(sign * px, -sign * (py - 1.0 / k)) / k
+
+
+def timing_law(
+    path: ReferencePath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY
+) -> Any:
+    """``lambda+ = lambda + u2 cos(theta - theta_P(lambda)) T`` (paper Sec. VI-B)."""
+    theta_p = path.goal.theta + path.curvature * lam
+    return lam + u2 * ops.cos(theta - theta_p) * dt
+
+
+def path_error(
+    path: ReferencePath,
+    x: Any,
+    y: Any,
+    theta: Any,
+    speed: Any,
+    lam: Any,
+    v_ref: float,
+    ops: Ops = NUMPY,
+    wrap: bool = True,
+) -> tuple[Any, Any, Any, Any]:
+    """``e = (c1 - c1_P, c2 - c2_P, theta - theta_P, speed - v_ref)`` at arc length ``lam``.
+
+    ``wrap`` maps the heading error to [-pi, pi); the MPC, whose headings are unwrapped near the
+    path's, uses the smooth unwrapped difference.
+    """
+    px, py, pth = point(path, lam, ops)
+    dth = theta - pth
+    if wrap:
+        dth = ops.wrap_angle(dth)
+    return x - px, y - py, dth, speed - v_ref
+
+
+def path_error_vector(
+    path: ReferencePath, pose: np.ndarray, speed: float, v_ref: float
+) -> tuple[np.ndarray, float]:
+    """e_k at the closest path point of ``pose (3,)``: returns ``(e (4,), lambda)``."""
+    lam = float(project(path, pose[0], pose[1]))
+    e = path_error(path, pose[0], pose[1], pose[2], speed, lam, v_ref)
+    return np.array(e, dtype=float), lam

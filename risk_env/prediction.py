@@ -1,0 +1,127 @@
+"""The object's prediction over the horizon (paper Sec. VI-C, with the SPEC's centring).
+
+From a measurement ``(c1, c2, theta, v, omega)`` the mean follows the unicycle with the measured,
+constant inputs. At step n the position and the speed are independent truncated Gaussians:
+
+- position: mean_n, standard deviations ``sigma0 + n Q`` (c1, c2), truncated to the box
+  ``mean_n +- (box_half_width0 + n Delta)``;
+- speed: mean v, standard deviation ``sigma0_v + n Q_v``, truncated to
+  ``[v_lo0 - n Delta_v, v_hi0 + n Delta_v]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from risk_env.dynamics import unicycle_step
+from risk_env.ops import NUMPY, Ops
+from risk_env.scenario import Scenario
+from risk_env.truncnorm import sample as truncnorm_sample
+
+
+@dataclass(frozen=True)
+class Belief:
+    """The object's distribution at one or more prediction steps; fields broadcast together.
+
+    Each field is a float or an array (numpy) or a scalar expression (CasADi).
+    """
+
+    x: Any
+    """Mean c1 [m]."""
+    y: Any
+    """Mean c2 [m]."""
+    theta: Any
+    """Mean heading [rad] (deterministic)."""
+    speed: Any
+    """Mean speed [m/s]."""
+    sigma_x: Any
+    """Standard deviation of c1 [m]."""
+    sigma_y: Any
+    """Standard deviation of c2 [m]."""
+    sigma_v: Any
+    """Standard deviation of the speed [m/s]."""
+    half_x: Any
+    """Half width of the c1 truncation interval around the mean [m]."""
+    half_y: Any
+    """Half width of the c2 truncation interval around the mean [m]."""
+    v_lo: Any
+    """Lower speed truncation bound [m/s]."""
+    v_hi: Any
+    """Upper speed truncation bound [m/s]."""
+
+    SIZE = 11
+
+    def as_array(self) -> np.ndarray:
+        """The fields stacked on a last axis: ``(..., 11)``."""
+        return np.stack(
+            np.broadcast_arrays(*(np.asarray(getattr(self, f.name), float) for f in fields(self))),
+            -1,
+        )
+
+    @classmethod
+    def from_array(cls, a: Any) -> Belief:
+        """Inverse of :meth:`as_array`; also takes a CasADi vector of 11 entries."""
+        if isinstance(a, np.ndarray):
+            return cls(*(a[..., i] for i in range(cls.SIZE)))
+        return cls(*(a[i] for i in range(cls.SIZE)))
+
+    def __getitem__(self, index: Any) -> Belief:
+        """Index every (numpy) field alike, e.g. ``belief[n]`` for prediction step n."""
+        return Belief(*(np.asarray(getattr(self, f.name))[index] for f in fields(self)))
+
+    def sample(self, rng: np.random.Generator, size: int | tuple[int, ...] = ()) -> np.ndarray:
+        """Draws ``(size..., batch..., 3)`` of (c1 [m], c2 [m], v [m/s]) from ``rng``."""
+        size = (size,) if isinstance(size, int) else tuple(size)
+        cx = truncnorm_sample(
+            self.x, self.sigma_x, self.x - self.half_x, self.x + self.half_x, rng, size
+        )
+        cy = truncnorm_sample(
+            self.y, self.sigma_y, self.y - self.half_y, self.y + self.half_y, rng, size
+        )
+        v = truncnorm_sample(self.speed, self.sigma_v, self.v_lo, self.v_hi, rng, size)
+        return np.stack([cx, cy, v], axis=-1)
+
+
+def predict(
+    scenario: Scenario,
+    measurement: Any,
+    steps: int | None = None,
+    ops: Ops = NUMPY,
+) -> list[Belief]:
+    """Beliefs for n = 0..steps (default: the horizon N) from ``measurement``.
+
+    ``measurement``: ``(c1 [m], c2 [m], theta [rad], v [m/s], omega [rad/s])``, a sequence of
+    5 floats, arrays (batched) or CasADi scalars.
+    """
+    steps = scenario.horizon if steps is None else steps
+    u = scenario.uncertainty
+    x, y, th, v, w = (measurement[i] for i in range(5))
+    out = []
+    for n in range(steps + 1):
+        if n > 0:
+            x, y, th = unicycle_step(x, y, th, v, w, scenario.dt, ops)
+        out.append(
+            Belief(
+                x=x,
+                y=y,
+                theta=th,
+                speed=v,
+                sigma_x=u.sigma0[0] + n * u.sigma_growth[0],
+                sigma_y=u.sigma0[1] + n * u.sigma_growth[1],
+                sigma_v=u.sigma0[2] + n * u.sigma_growth[2],
+                half_x=u.box_half_width0[0] + n * u.box_growth[0],
+                half_y=u.box_half_width0[1] + n * u.box_growth[1],
+                v_lo=u.velocity_bounds0[0] - n * u.box_growth[2],
+                v_hi=u.velocity_bounds0[1] + n * u.box_growth[2],
+            )
+        )
+    return out
+
+
+def predict_array(scenario: Scenario, measurement: np.ndarray, steps: int | None = None) -> Belief:
+    """numpy convenience: one :class:`Belief` whose fields have a leading step axis ``(steps+1, ...)``."""
+    beliefs = predict(scenario, np.asarray(measurement, float).T, steps)
+    return Belief.from_array(np.stack([b.as_array() for b in beliefs]))

@@ -1,0 +1,296 @@
+"""Collision risk R = E[I_C(q_e, q_o) s(v_e, v_o)] and its estimators (paper Sec. VI-C).
+
+One interface, :class:`RiskEstimator`, serves the env, the agents, the tests and the benchmarks:
+
+- :class:`MonteCarloRisk`: the paper's eq. (16), the mean of I_C s over J draws;
+- :class:`ExactRisk`: positions and speed are independent, I_C uses positions only and s speeds
+  only, so R = P(||q_e - q_o|| <= r_e + r_o) E[s], the disc probability by fixed-node
+  Gauss-Legendre quadrature, E[s] in closed form. Smooth and deterministic;
+- :class:`WorstCaseRisk`: max over the truncation box and speed interval of I_C s (eq. 17), the
+  exact box form (point-to-box distance) or the paper's L-point grid (``grid=True``).
+
+The ego state is ``(c1 [m], c2 [m], theta [rad], v [m/s])`` on a last axis of 4 (numpy) or a
+CasADi vector of 4; the object's distribution is a :class:`~risk_env.prediction.Belief`. numpy
+forms broadcast the ego's batch shape against the belief's.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from risk_env.ops import CASADI, NUMPY, Ops
+from risk_env.prediction import Belief
+from risk_env.scenario import Scenario
+from risk_env.severity import Severity, make_severity
+
+ESTIMATOR_NAMES: tuple[str, ...] = ("exact", "monte_carlo", "worst_case", "grid")
+
+GAUSS_NODES = 4
+"""Gauss-Legendre nodes per quadrature segment of the disc probability."""
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(GAUSS_NODES)
+_SIGMA_BREAKS = (-5.0, -2.5, -1.0, 0.0, 1.0, 2.5, 5.0)
+"""Where (in standard deviations of the outer axis) the quadrature splits."""
+_SEGMENTS = len(_SIGMA_BREAKS) + 5
+_NODE_X = np.tile(_GAUSS_X, _SEGMENTS)
+_NODE_W = np.tile(_GAUSS_W, _SEGMENTS)
+_EDGE = 1.0 - 1e-12
+SUPPORT = 7.0
+"""The outer quadrature covers at most +-SUPPORT standard deviations (mass beyond: < 3e-12)."""
+GEOMETRY_FLOOR = 1e-6
+"""Standard deviations and box half widths [m] below this are raised to it: a point mass is
+represented to within 1e-6 m."""
+
+
+def _ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
+    if isinstance(ego, np.ndarray):
+        if ego.shape[-1:] != (4,):
+            raise ValueError(
+                f"ego state must have a last axis of 4 (c1, c2, theta, v), got {ego.shape}"
+            )
+        return ego[..., 0], ego[..., 1], ego[..., 2], ego[..., 3]
+    return ego[0], ego[1], ego[2], ego[3]
+
+
+def disc_probability(dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops = NUMPY) -> Any:
+    """P(||d - z|| <= radius) for z ~ truncated N(0, diag(sigma_x^2, sigma_y^2)) on the box
+    ``[-half_x, half_x] x [-half_y, half_y]``; ``(dx, dy)`` = ego centre minus object mean [m].
+
+    One axis (the inner) is integrated in closed form with Phi, the other (the outer) by
+    Gauss-Legendre quadrature in the disc angle t (x = dx + r sin t, which removes the
+    square-root ends of the chord). The outer axis is the one along which the ego is least
+    offset, so near the object the disc boundary runs along it and the sharp crossing of the
+    boundary falls to the closed form. The outer integral is split where the box edges cut the
+    disc and at fixed multiples of the outer standard deviation.
+    """
+    r = radius
+    sx = ops.maximum(belief.sigma_x, GEOMETRY_FLOOR)
+    sy = ops.maximum(belief.sigma_y, GEOMETRY_FLOOR)
+    hx = ops.maximum(belief.half_x, GEOMETRY_FLOOR)
+    hy = ops.maximum(belief.half_y, GEOMETRY_FLOOR)
+    swap = ops.abs(dx) > ops.abs(dy)
+    dx, dy = ops.where(swap, dy, dx), ops.where(swap, dx, dy)
+    sx, sy = ops.where(swap, sy, sx), ops.where(swap, sx, sy)
+    hx, hy = ops.where(swap, hy, hx), ops.where(swap, hx, hy)
+    ex = ops.expand
+
+    # Angles where the outer coordinate meets a box edge or a multiple of its sigma ...
+    at_x = ops.stack([-hx, hx, *(k * sx for k in _SIGMA_BREAKS)])
+    at_x = ops.clip(at_x, -SUPPORT * ex(sx), SUPPORT * ex(sx))
+    t_x = ops.asin(ops.clip((at_x - ex(dx)) / r, -_EDGE, _EDGE))
+    t_lo = ops.part(t_x, slice(0, 1))
+    t_hi = ops.maximum(ops.part(t_x, slice(1, 2)), t_lo)
+    # ... and where the chord's ends cross the inner box edges: r cos t = |hy -+ dy|.
+    a = ops.acos(ops.clip(ops.stack([ops.abs(hy - dy), ops.abs(hy + dy)]) / r, 0.0, _EDGE))
+    inner = ops.sort(
+        ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi)
+    )
+    edges = ops.stack_vectors([t_lo, inner, t_hi])
+    lo, hi = ops.part(edges, slice(0, -1)), ops.part(edges, slice(1, None))
+    k = len(_GAUSS_X)
+    half = ops.repeat(0.5 * (hi - lo), k)
+    t = ops.repeat(0.5 * (hi + lo), k) + half * ops.const(_NODE_X)
+    w = half * ops.const(_NODE_W)
+
+    half_chord = r * ops.cos(t)
+    x = ex(dx) + r * ops.sin(t)
+    y_hi = ops.minimum(ex(hy), ex(dy) + half_chord)
+    y_lo = ops.maximum(-ex(hy), ex(dy) - half_chord)
+    zx = ops.erf(hx / (sx * math.sqrt(2.0)))
+    zy = ops.erf(hy / (sy * math.sqrt(2.0)))
+    # Complementary form: the exact mass of the outer range times the full inner mass, minus
+    # what the chord misses; exact wherever the chord spans the inner box.
+    strip = ops.maximum(ops.norm_cdf(y_hi / ex(sy)) - ops.norm_cdf(y_lo / ex(sy)), 0.0)
+    missed = ops.sum(w * half_chord * ops.norm_pdf(x / ex(sx)) * (ex(zy) - strip)) / sx
+    s_lo, s_hi = ops.sin(ops.part(t_lo, 0)), ops.sin(ops.part(t_hi, 0))
+    x_lo, x_hi = dx + r * s_lo, dx + r * s_hi
+    mass = ops.norm_cdf(x_hi / sx) - ops.norm_cdf(x_lo / sx)
+    return ops.clip((mass * zy - missed) / (zx * zy), 0.0, 1.0)
+
+
+def signed_box_distance(dx: Any, dy: Any, half_x: Any, half_y: Any, ops: Ops = NUMPY) -> Any:
+    """Signed distance [m] from the point ``(dx, dy)`` to the box ``[-hx, hx] x [-hy, hy]``:
+    Euclidean outside, minus the distance to the nearest edge inside."""
+    qx = ops.abs(dx) - half_x
+    qy = ops.abs(dy) - half_y
+    ox, oy = ops.maximum(qx, 0.0), ops.maximum(qy, 0.0)
+    outside = ops.sqrt(ox * ox + oy * oy + 1e-12) - 1e-6
+    return outside + ops.minimum(ops.maximum(qx, qy), 0.0)
+
+
+class RiskEstimator(ABC):
+    """R_{n|k} for ego states against the object's belief at the same prediction step.
+
+    ``risk`` is the numpy form (batched by broadcasting); ``casadi_risk`` the symbolic one;
+    ``casadi_margin(ego, belief, epsilon)`` is >= 0 exactly when R <= epsilon, scaled for a solver.
+    """
+
+    name: str
+    smooth: bool = True
+    """Whether the CasADi form has useful gradients everywhere (False: piecewise smooth)."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.severity: Severity = make_severity(scenario)
+        self.radius = scenario.collision_distance
+
+    @abstractmethod
+    def _risk(self, ego: Any, belief: Belief, ops: Ops, **kwargs: Any) -> Any: ...
+
+    def risk(
+        self, ego: np.ndarray, belief: Belief, rng: np.random.Generator | None = None
+    ) -> np.ndarray:
+        """R for ``ego (..., 4)`` states: shape ``(...)`` broadcast with the belief's fields."""
+        return np.asarray(self._risk(np.asarray(ego, dtype=float), belief, NUMPY))
+
+    def casadi_risk(self, ego: ca.SX, belief: Belief, **kwargs: Any) -> ca.SX:
+        """The symbolic R for a CasADi ego vector of 4 and a belief of CasADi scalars."""
+        return self._risk(ego, belief, CASADI, **kwargs)
+
+    def casadi_margin(
+        self, ego: ca.SX, belief: Belief, epsilon: float | ca.SX, **kwargs: Any
+    ) -> ca.SX:
+        """``(epsilon - R) / scale``: >= 0 when the constraint R <= epsilon holds."""
+        return (epsilon - self.casadi_risk(ego, belief, **kwargs)) / self.severity.scale
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(severity={self.severity.name!r})"
+
+
+class ExactRisk(RiskEstimator):
+    """R = P(disc) E[s]: deterministic and smooth in the ego state."""
+
+    name = "exact"
+
+    def _risk(self, ego, belief, ops, **kwargs):
+        x, y, th, v = _ego_parts(ego)
+        p = disc_probability(x - belief.x, y - belief.y, self.radius, belief, ops)
+        return p * self.severity.expected(v, th, belief, ops)
+
+
+class MonteCarloRisk(RiskEstimator):
+    """The paper's eq. (16): ``(1/J) sum_j I_C(q_e, q_o,j) s(v_e, v_o,j)``.
+
+    numpy: J draws from the passed-in generator per call. CasADi: the draws are parameters
+    ``samples (J, 3)`` of (c1, c2, v), and I_C is smoothed to a logistic of width
+    ``smoothing`` [m] so that a gradient exists.
+    """
+
+    name = "monte_carlo"
+
+    def __init__(
+        self, scenario: Scenario, samples: int | None = None, smoothing: float = 0.05
+    ) -> None:
+        super().__init__(scenario)
+        self.samples = scenario.mc_samples if samples is None else int(samples)
+        if self.samples < 1:
+            raise ValueError(f"samples must be >= 1, got {samples}")
+        if not smoothing > 0:
+            raise ValueError(f"smoothing must be > 0 [m], got {smoothing}")
+        self.smoothing = smoothing
+
+    def risk(self, ego, belief, rng=None, draws: np.ndarray | None = None):
+        """As :meth:`RiskEstimator.risk`; needs ``rng`` (a numpy Generator) or ``draws (J, ..., 3)``."""
+        ego = np.asarray(ego, dtype=float)
+        if draws is None:
+            if rng is None:
+                raise ValueError(
+                    "the Monte Carlo estimator needs rng=np.random.Generator (or draws)"
+                )
+            draws = belief.sample(rng, self.samples)
+        x, y, th, v = _ego_parts(ego)
+        # draws (J, *belief_batch, 3): pad so J stays first when the ego batch has more axes
+        extra = max(np.ndim(x) - (draws.ndim - 2), 0)
+        draws = draws.reshape(draws.shape[:1] + (1,) * extra + draws.shape[1:])
+        hit = np.hypot(x - draws[..., 0], y - draws[..., 1]) <= self.radius
+        s = self.severity.value(v, th, draws[..., 2], belief.theta, NUMPY)
+        return np.mean(hit * s, axis=0)
+
+    def _risk(self, ego, belief, ops, samples=None, **kwargs):
+        if samples is None:
+            raise ValueError("the CasADi Monte Carlo risk needs samples=(J, 3) draws")
+        x, y, th, v = _ego_parts(ego)
+        dx = x - samples[:, 0]
+        dy = y - samples[:, 1]
+        dist = ca.sqrt(dx * dx + dy * dy + 1e-9)
+        hit = 1.0 / (1.0 + ca.exp((dist - self.radius) / self.smoothing))
+        s = self.severity.value(v, th, samples[:, 2], belief.theta, ops)
+        return ca.sum1(hit * s) / samples.shape[0]
+
+
+class WorstCaseRisk(RiskEstimator):
+    """``max I_C s`` over the truncation box and speed interval (paper eq. 17).
+
+    Exact box form (default): [signed distance to the box <= r] times the worst severity over the
+    speed interval. ``grid=True``: the paper's under-approximation on L points per interval
+    (L = ``scenario.grid_points``), evaluated through the nearest grid point per axis, which
+    equals the brute-force maximum over the L^3 grid.
+    """
+
+    smooth = False
+
+    def __init__(
+        self, scenario: Scenario, grid: bool = False, grid_points: int | None = None
+    ) -> None:
+        super().__init__(scenario)
+        self.grid = grid
+        self.grid_points = scenario.grid_points if grid_points is None else int(grid_points)
+        if self.grid_points < 2:
+            raise ValueError(f"grid_points must be >= 2, got {grid_points}")
+        self.name = "grid" if grid else "worst_case"
+
+    def _snap(self, d: Any, half: Any, ops: Ops) -> Any:
+        """The grid point of ``[-half, half]`` (L points) nearest to ``d``."""
+        h = ops.maximum(half, GEOMETRY_FLOOR)
+        spacing = 2.0 * h / (self.grid_points - 1)
+        return -h + spacing * ops.floor((ops.clip(d, -h, h) + h) / spacing + 0.5)
+
+    def distance(self, ego: Any, belief: Belief, ops: Ops = NUMPY) -> Any:
+        """Distance [m] from the ego centre to the nearest possible object centre (signed for
+        the box: negative inside)."""
+        x, y, _, _ = _ego_parts(ego)
+        dx, dy = x - belief.x, y - belief.y
+        if not self.grid:
+            return signed_box_distance(dx, dy, belief.half_x, belief.half_y, ops)
+        ex = dx - self._snap(dx, belief.half_x, ops)
+        ey = dy - self._snap(dy, belief.half_y, ops)
+        return ops.sqrt(ex * ex + ey * ey + 1e-12) - 1e-6
+
+    def worst_severity(self, ego: Any, belief: Belief, ops: Ops = NUMPY) -> Any:
+        """max of s over the speed interval (or its L grid points)."""
+        _, _, th, v = _ego_parts(ego)
+        lo, hi = belief.v_lo, belief.v_hi
+        near0 = ops.clip(0.0 * v, lo, hi)
+        if self.grid:
+            mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+            near0 = mid + self._snap(near0 - mid, half, ops)
+        return self.severity.worst(v, th, lo, hi, near0, belief.theta, ops)
+
+    def _risk(self, ego, belief, ops, **kwargs):
+        hit = self.distance(ego, belief, ops) <= self.radius
+        s = self.worst_severity(ego, belief, ops)
+        return ops.where(hit, s, 0.0 * s)
+
+    def casadi_margin(self, ego, belief, epsilon, **kwargs):
+        """``max(distance - r [m], (epsilon - s_worst) / scale) >= 0``: keep the ego disc off
+        every possible object position, unless even the worst severity is tolerable."""
+        clearance = self.distance(ego, belief, CASADI) - self.radius
+        slack = (epsilon - self.worst_severity(ego, belief, CASADI)) / self.severity.scale
+        return ca.fmax(clearance, slack)
+
+
+def make_estimator(name: str, scenario: Scenario, **kwargs: Any) -> RiskEstimator:
+    """The estimator called ``name`` (one of :data:`ESTIMATOR_NAMES`) for ``scenario``."""
+    if name == "exact":
+        return ExactRisk(scenario, **kwargs)
+    if name == "monte_carlo":
+        return MonteCarloRisk(scenario, **kwargs)
+    if name == "worst_case":
+        return WorstCaseRisk(scenario, **kwargs)
+    if name == "grid":
+        return WorstCaseRisk(scenario, grid=True, **kwargs)
+    raise ValueError(f"unknown risk estimator {name!r}; expected one of {ESTIMATOR_NAMES}")
