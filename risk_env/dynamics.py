@@ -45,6 +45,4 @@ def rollout(state: np.ndarray, action: np.ndarray, dt: float, steps: int) -> np.
 
 def casadi_step(state: ca.SX | ca.MX, action: ca.SX | ca.MX, dt: float) -> ca.SX | ca.MX:
     """CasADi face: ``state (3,)`` and ``action (2,)`` column vectors -> next state ``(3,)``."""
-    return ca.vertcat(
-        *unicycle_step(state[0], state[1], state[2], action[0], action[1], dt, CASADI)
-    )
+    return ca.vertcat(*unicycle_step(state[0], state[1], state[2], action[0], action[1], dt, CASADI))

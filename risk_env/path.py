@@ -42,9 +42,7 @@ def project(path: ReferencePath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
     return ops.atan2(sign * px, -sign * (py - 1.0 / k)) / k
 
 
-def timing_law(
-    path: ReferencePath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY
-) -> Any:
+def timing_law(path: ReferencePath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY) -> Any:
     """``lambda+ = lambda + u2 cos(theta - theta_P(lambda)) T`` (paper Sec. VI-B)."""
     theta_p = path.goal.theta + path.curvature * lam
     return lam + u2 * ops.cos(theta - theta_p) * dt

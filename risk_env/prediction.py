@@ -75,12 +75,8 @@ class Belief:
     def sample(self, rng: np.random.Generator, size: int | tuple[int, ...] = ()) -> np.ndarray:
         """Draws ``(size..., batch..., 3)`` of (c1 [m], c2 [m], v [m/s]) from ``rng``."""
         size = (size,) if isinstance(size, int) else tuple(size)
-        cx = truncnorm_sample(
-            self.x, self.sigma_x, self.x - self.half_x, self.x + self.half_x, rng, size
-        )
-        cy = truncnorm_sample(
-            self.y, self.sigma_y, self.y - self.half_y, self.y + self.half_y, rng, size
-        )
+        cx = truncnorm_sample(self.x, self.sigma_x, self.x - self.half_x, self.x + self.half_x, rng, size)
+        cy = truncnorm_sample(self.y, self.sigma_y, self.y - self.half_y, self.y + self.half_y, rng, size)
         v = truncnorm_sample(self.speed, self.sigma_v, self.v_lo, self.v_hi, rng, size)
         return np.stack([cx, cy, v], axis=-1)
 

@@ -49,9 +49,7 @@ represented to within 1e-6 m."""
 def _ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
     if isinstance(ego, np.ndarray):
         if ego.shape[-1:] != (4,):
-            raise ValueError(
-                f"ego state must have a last axis of 4 (c1, c2, theta, v), got {ego.shape}"
-            )
+            raise ValueError(f"ego state must have a last axis of 4 (c1, c2, theta, v), got {ego.shape}")
         return ego[..., 0], ego[..., 1], ego[..., 2], ego[..., 3]
     return ego[0], ego[1], ego[2], ego[3]
 
@@ -86,9 +84,7 @@ def disc_probability(dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops =
     t_hi = ops.maximum(ops.part(t_x, slice(1, 2)), t_lo)
     # ... and where the chord's ends cross the inner box edges: r cos t = |hy -+ dy|.
     a = ops.acos(ops.clip(ops.stack([ops.abs(hy - dy), ops.abs(hy + dy)]) / r, 0.0, _EDGE))
-    inner = ops.sort(
-        ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi)
-    )
+    inner = ops.sort(ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi))
     edges = ops.stack_vectors([t_lo, inner, t_hi])
     lo, hi = ops.part(edges, slice(0, -1)), ops.part(edges, slice(1, None))
     k = len(_GAUSS_X)
@@ -141,9 +137,7 @@ class RiskEstimator(ABC):
     @abstractmethod
     def _risk(self, ego: Any, belief: Belief, ops: Ops, **kwargs: Any) -> Any: ...
 
-    def risk(
-        self, ego: np.ndarray, belief: Belief, rng: np.random.Generator | None = None
-    ) -> np.ndarray:
+    def risk(self, ego: np.ndarray, belief: Belief, rng: np.random.Generator | None = None) -> np.ndarray:
         """R for ``ego (..., 4)`` states: shape ``(...)`` broadcast with the belief's fields."""
         return np.asarray(self._risk(np.asarray(ego, dtype=float), belief, NUMPY))
 
@@ -151,9 +145,7 @@ class RiskEstimator(ABC):
         """The symbolic R for a CasADi ego vector of 4 and a belief of CasADi scalars."""
         return self._risk(ego, belief, CASADI, **kwargs)
 
-    def casadi_margin(
-        self, ego: ca.SX, belief: Belief, epsilon: float | ca.SX, **kwargs: Any
-    ) -> ca.SX:
+    def casadi_margin(self, ego: ca.SX, belief: Belief, epsilon: float | ca.SX, **kwargs: Any) -> ca.SX:
         """``(epsilon - R) / scale``: >= 0 when the constraint R <= epsilon holds."""
         return (epsilon - self.casadi_risk(ego, belief, **kwargs)) / self.severity.scale
 
@@ -182,9 +174,7 @@ class MonteCarloRisk(RiskEstimator):
 
     name = "monte_carlo"
 
-    def __init__(
-        self, scenario: Scenario, samples: int | None = None, smoothing: float = 0.05
-    ) -> None:
+    def __init__(self, scenario: Scenario, samples: int | None = None, smoothing: float = 0.05) -> None:
         super().__init__(scenario)
         self.samples = scenario.mc_samples if samples is None else int(samples)
         if self.samples < 1:
@@ -198,9 +188,7 @@ class MonteCarloRisk(RiskEstimator):
         ego = np.asarray(ego, dtype=float)
         if draws is None:
             if rng is None:
-                raise ValueError(
-                    "the Monte Carlo estimator needs rng=np.random.Generator (or draws)"
-                )
+                raise ValueError("the Monte Carlo estimator needs rng=np.random.Generator (or draws)")
             draws = belief.sample(rng, self.samples)
         x, y, th, v = _ego_parts(ego)
         # draws (J, *belief_batch, 3): pad so J stays first when the ego batch has more axes
@@ -233,9 +221,7 @@ class WorstCaseRisk(RiskEstimator):
 
     smooth = False
 
-    def __init__(
-        self, scenario: Scenario, grid: bool = False, grid_points: int | None = None
-    ) -> None:
+    def __init__(self, scenario: Scenario, grid: bool = False, grid_points: int | None = None) -> None:
         super().__init__(scenario)
         self.grid = grid
         self.grid_points = scenario.grid_points if grid_points is None else int(grid_points)

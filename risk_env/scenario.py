@@ -104,9 +104,7 @@ class Ego:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", Pose.of(self.start, "ego.start"))
-        object.__setattr__(
-            self, "initial_input", _triple("ego.initial_input", self.initial_input, 2)
-        )
+        object.__setattr__(self, "initial_input", _triple("ego.initial_input", self.initial_input, 2))
         _positive("ego.radius", self.radius)
         _positive("ego.mass", self.mass)
         _positive("ego.v_ref", self.v_ref, strict=False)
@@ -123,9 +121,7 @@ class Ego:
         _positive("ego.omega_rate_max", self.omega_rate_max)
         v0, w0 = self.initial_input
         if not (self.v_min <= v0 <= self.v_max and abs(w0) <= self.omega_max):
-            raise ValueError(
-                f"ego.initial_input {self.initial_input} lies outside the input limits"
-            )
+            raise ValueError(f"ego.initial_input {self.initial_input} lies outside the input limits")
 
 
 @dataclass(frozen=True)
@@ -194,9 +190,7 @@ class Uncertainty:
         """The paper's Table I: ``"low"``, ``"medium"`` or ``"high"``."""
         table = {"low": (0.1, 1.0), "medium": (0.8, 2.0), "high": (1.5, 3.0)}
         if name not in table:
-            raise ValueError(
-                f"unknown uncertainty preset {name!r}; expected one of {UNCERTAINTY_PRESETS}"
-            )
+            raise ValueError(f"unknown uncertainty preset {name!r}; expected one of {UNCERTAINTY_PRESETS}")
         q, delta = table[name]
         return cls(sigma_growth=(q, q, q), box_growth=(delta, delta, delta))
 
@@ -285,9 +279,7 @@ class Scenario:
         object.__setattr__(self, "cost_weights", weights)
         _positive("risk_tolerance", self.risk_tolerance, strict=False)
         if self.severity not in SEVERITY_NAMES:
-            raise ValueError(
-                f"unknown severity {self.severity!r}; expected one of {SEVERITY_NAMES}"
-            )
+            raise ValueError(f"unknown severity {self.severity!r}; expected one of {SEVERITY_NAMES}")
         if abs(self.path.curvature) > self.ego.omega_max / max(self.ego.v_ref, 1e-9):
             raise ValueError(
                 f"path.curvature {self.path.curvature} needs a turn rate above ego.omega_max at"
@@ -316,9 +308,7 @@ class Scenario:
             if name not in OVERRIDES:
                 close = difflib.get_close_matches(name, OVERRIDES, n=3)
                 hint = f"; did you mean {', '.join(close)}?" if close else ""
-                raise TypeError(
-                    f"unknown scenario parameter {name!r}{hint} Valid names: {sorted(OVERRIDES)}"
-                )
+                raise TypeError(f"unknown scenario parameter {name!r}{hint} Valid names: {sorted(OVERRIDES)}")
             part, attr = OVERRIDES[name]
             if part is None:
                 top[attr] = value

@@ -36,9 +36,7 @@ class Severity(ABC):
         """E[s] over the belief's truncated-Gaussian speed."""
 
     @abstractmethod
-    def worst(
-        self, v_e: Any, th_e: Any, v_lo: Any, v_hi: Any, v_near0: Any, th_o: Any, ops: Ops
-    ) -> Any:
+    def worst(self, v_e: Any, th_e: Any, v_lo: Any, v_hi: Any, v_near0: Any, th_o: Any, ops: Ops) -> Any:
         """max of s over object speeds in a set with end points ``v_lo, v_hi`` and element
         ``v_near0`` closest to 0."""
 
@@ -76,9 +74,7 @@ class PaperSeverity(Severity):
     def worst(self, v_e, th_e, v_lo, v_hi, v_near0, th_o, ops):
         e = self.m_e * v_e * v_e
         far = ops.maximum(v_lo * v_lo, v_hi * v_hi)
-        return 0.5 * ops.maximum(
-            ops.abs(e - self.m_o * far), ops.abs(e - self.m_o * v_near0 * v_near0)
-        )
+        return 0.5 * ops.maximum(ops.abs(e - self.m_o * far), ops.abs(e - self.m_o * v_near0 * v_near0))
 
 
 class PlasticSeverity(Severity):
@@ -104,9 +100,7 @@ class PlasticSeverity(Severity):
 
     def worst(self, v_e, th_e, v_lo, v_hi, v_near0, th_o, ops):
         # Convex in v_o: the maximum sits at an end point.
-        return ops.maximum(
-            self.value(v_e, th_e, v_lo, th_o, ops), self.value(v_e, th_e, v_hi, th_o, ops)
-        )
+        return ops.maximum(self.value(v_e, th_e, v_lo, th_o, ops), self.value(v_e, th_e, v_hi, th_o, ops))
 
 
 class ProbabilitySeverity(Severity):

@@ -26,9 +26,7 @@ def sample(
     Inverse-CDF sampling, done on the side of the mean where the tail is thin so that far tails
     keep their precision. A zero ``sigma`` or a zero-width interval gives the clipped mean.
     """
-    mean, sigma, lo, hi = np.broadcast_arrays(
-        *(np.asarray(a, float) for a in (mean, sigma, lo, hi))
-    )
+    mean, sigma, lo, hi = np.broadcast_arrays(*(np.asarray(a, float) for a in (mean, sigma, lo, hi)))
     shape = tuple(size) + mean.shape
     u = rng.random(shape)
     degenerate = (sigma <= SIGMA_FLOOR) | (hi <= lo)
@@ -62,9 +60,5 @@ def partial_moments(
     pa, pb = ops.norm_pdf(a), ops.norm_pdf(b)
     p = ops.norm_cdf(b) - ops.norm_cdf(a)
     m1 = mu * p + sigma * (pa - pb)
-    m2 = (
-        (mu * mu + sigma * sigma) * p
-        + 2.0 * mu * sigma * (pa - pb)
-        + sigma * sigma * (a * pa - b * pb)
-    )
+    m2 = (mu * mu + sigma * sigma) * p + 2.0 * mu * sigma * (pa - pb) + sigma * sigma * (a * pa - b * pb)
     return p / norm, m1 / norm, m2 / norm
