@@ -105,7 +105,9 @@ def disc_probability(dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops =
     s_lo, s_hi = ops.sin(ops.part(t_lo, 0)), ops.sin(ops.part(t_hi, 0))
     x_lo, x_hi = dx + r * s_lo, dx + r * s_hi
     mass = ops.norm_cdf(x_hi / sx) - ops.norm_cdf(x_lo / sx)
-    return ops.clip((mass * zy - missed) / (zx * zy), 0.0, 1.0)
+    p = ops.clip((mass * zy - missed) / (zx * zy), 0.0, 1.0)
+    # Exactly 0 when the disc misses the box (the complementary form leaves ~1e-7 there).
+    return ops.where(signed_box_distance(dx, dy, hx, hy, ops) < r, p, 0.0 * p)
 
 
 def signed_box_distance(dx: Any, dy: Any, half_x: Any, half_y: Any, ops: Ops = NUMPY) -> Any:

@@ -1,0 +1,224 @@
+import itertools
+
+import casadi as ca
+import numpy as np
+import pytest
+from scipy import integrate, stats
+
+from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
+from risk_env.ops import NUMPY
+from risk_env.risk import WorstCaseRisk, disc_probability, signed_box_distance
+
+MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
+
+
+def belief(preset: str, n: int, severity: str = "paper") -> tuple[Scenario, Belief]:
+    s = Scenario.preset(preset, severity=severity)
+    return s, predict_array(s, MEASUREMENT)[n]
+
+
+def reference_probability(dx, dy, r, sx, sy, hx, hy):
+    """P(disc) by adaptive quadrature of the truncated density (independent of the fixed-node rule)."""
+    zx = stats.norm.cdf(hx / sx) - stats.norm.cdf(-hx / sx)
+    zy = stats.norm.cdf(hy / sy) - stats.norm.cdf(-hy / sy)
+
+    def inner(x):
+        w = np.sqrt(max(r * r - (x - dx) ** 2, 0.0))
+        lo, hi = max(-hy, dy - w), min(hy, dy + w)
+        return (
+            0.0
+            if hi <= lo
+            else stats.norm.pdf(x / sx) / sx * (stats.norm.cdf(hi / sy) - stats.norm.cdf(lo / sy))
+        )
+
+    lo, hi = max(-hx, dx - r), min(hx, dx + r)
+    if hi <= lo:
+        return 0.0
+    cuts = [k * sx for k in (-3, -1, 0, 1, 3)]
+    cuts += [dx + sg * np.sqrt(max(r * r - (c - dy) ** 2, 0)) for c in (hy, -hy, 0) for sg in (-1, 1)]
+    pts = sorted(p for p in set(cuts) if lo < p < hi)
+    value, _ = integrate.quad(inner, lo, hi, points=pts or None, limit=500, epsabs=1e-13, epsrel=1e-11)
+    return value / (zx * zy)
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        (0.3, 0.2, 0.1, 0.1, 1.0, 1.0),  # low preset, n = 1, object inside the disc
+        (3.05, 0.1, 0.1, 0.1, 1.0, 1.0),  # disc edge through the object's mean, sharp Gaussian
+        (2.0, -2.9, 0.8, 0.8, 2.0, 2.0),  # medium, truncation active
+        (4.0, -0.2, 0.42, 0.45, 4.2, 4.5),
+        (-1.2, 3.3, 1.5, 1.7, 3.0, 3.4),  # anisotropic, box cuts the disc
+        (9.0, 6.0, 4.5, 4.5, 9.0, 9.0),  # high preset, far
+        (25.0, 0.0, 1.0, 1.0, 6.0, 6.0),  # disc misses the box: exactly 0
+    ],
+)
+def test_disc_probability_matches_adaptive_quadrature(case):
+    dx, dy, sx, sy, hx, hy = case
+    b = Belief(0.0, 0.0, 0.0, 3.0, sx, sy, 1.0, hx, hy, -5.0, 5.0)
+    p = float(disc_probability(dx, dy, 3.0, b))
+    assert p == pytest.approx(reference_probability(dx, dy, 3.0, sx, sy, hx, hy), abs=5e-5)
+
+
+def test_disc_probability_is_exactly_zero_off_the_box_and_positive_on_it():
+    b = Belief(0.0, 0.0, 0.0, 3.0, 1.0, 1.0, 1.0, 2.0, 2.0, -5.0, 5.0)
+    assert disc_probability(5.0 + 1e-6, 0.5, 3.0, b) == 0.0
+    assert disc_probability(5.0 - 1e-3, 0.5, 3.0, b) > 0.0
+
+
+@pytest.mark.parametrize("severity", ["paper", "plastic"])
+@pytest.mark.parametrize("v_e", [0.0, 1.7, 3.0, 4.5, -2.0])
+def test_expected_severity_closed_form(severity, v_e):
+    s, b = belief("high", 2, severity)
+    est = make_estimator("exact", s)
+    th_e = 0.4
+    dist = stats.truncnorm(
+        (b.v_lo - b.speed) / b.sigma_v, (b.v_hi - b.speed) / b.sigma_v, loc=b.speed, scale=b.sigma_v
+    )
+    ref = dist.expect(
+        lambda v: est.severity.value(v_e, th_e, v, b.theta, NUMPY), points=[-abs(v_e), abs(v_e)]
+    )
+    assert float(est.severity.expected(v_e, th_e, b, NUMPY)) == pytest.approx(ref, rel=1e-7, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("preset", "n", "ego", "label"),
+    [
+        ("low", 1, (5.0, -2.6, 0.0, 4.0), "overlapping"),
+        ("medium", 2, (6.0, -0.5, 0.3, 4.0), "truncation active"),
+        ("high", 4, (8.0, 4.0, 0.2, 2.0), "wide spread"),
+        ("medium", 3, (20.0, 0.0, 0.0, 4.0), "far away"),
+    ],
+)
+@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+def test_exact_risk_within_monte_carlo_confidence_interval(preset, n, ego, label, severity):
+    s, b = belief(preset, n, severity)
+    exact = float(make_estimator("exact", s).risk(np.array(ego), b))
+    mc = make_estimator("monte_carlo", s, samples=400_000)
+    draws = b.sample(np.random.default_rng(11), 400_000)
+    hit = np.hypot(ego[0] - draws[:, 0], ego[1] - draws[:, 1]) <= 3.0
+    terms = hit * mc.severity.value(ego[3], ego[2], draws[:, 2], b.theta, NUMPY)
+    estimate, stderr = terms.mean(), terms.std() / np.sqrt(len(terms))
+    assert float(mc.risk(np.array(ego), b, draws=draws)) == pytest.approx(estimate)
+    if label == "far away":
+        assert exact == 0.0 and estimate == 0.0
+    else:
+        assert exact > 0
+        assert abs(exact - estimate) <= 4.5 * stderr + 1e-9 * abs(exact), (label, exact, estimate, stderr)
+
+
+@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+def test_worst_case_bounds_exact_and_grid_under_approximates(severity):
+    rng = np.random.default_rng(5)
+    s, b = belief("medium", 3, severity)
+    egos = np.column_stack(
+        [rng.normal(5, 8, 2000), rng.normal(2, 8, 2000), rng.uniform(-3, 3, 2000), rng.uniform(-4, 8, 2000)]
+    )
+    exact = make_estimator("exact", s).risk(egos, b)
+    worst = make_estimator("worst_case", s).risk(egos, b)
+    grid = make_estimator("grid", s).risk(egos, b)
+    assert np.all(exact >= 0)
+    assert np.all(worst >= exact - 1e-9)
+    assert np.all(grid <= worst + 1e-9)
+    assert np.any(worst > 0) and np.any(worst == 0)
+
+
+def test_grid_equals_the_brute_force_maximum_over_l_cubed_points():
+    s, b = belief("high", 2)
+    est = WorstCaseRisk(s, grid=True, grid_points=9)
+    cx = np.linspace(b.x - b.half_x, b.x + b.half_x, 9)
+    cy = np.linspace(b.y - b.half_y, b.y + b.half_y, 9)
+    vo = np.linspace(b.v_lo, b.v_hi, 9)
+    rng = np.random.default_rng(2)
+    for ego in np.column_stack(
+        [rng.normal(b.x, 10, 300), rng.normal(b.y, 10, 300), rng.uniform(-3, 3, 300), rng.uniform(-4, 8, 300)]
+    ):
+        brute = max(
+            (np.hypot(ego[0] - x, ego[1] - y) <= 3.0) * est.severity.value(ego[3], ego[2], v, b.theta, NUMPY)
+            for x, y, v in itertools.product(cx, cy, vo)
+        )
+        assert float(est.risk(ego, b)) == pytest.approx(brute, abs=1e-9)
+
+
+def test_grid_converges_to_the_exact_box_form():
+    s, b = belief("high", 4)
+    rng = np.random.default_rng(4)
+    egos = np.column_stack(
+        [rng.normal(b.x, 12, 4000), rng.normal(b.y, 12, 4000), np.zeros(4000), rng.uniform(-4, 8, 4000)]
+    )
+    box = make_estimator("worst_case", s)
+    d_box = box.distance(egos, b)
+    gaps = []
+    for points in (5, 40, 400):
+        grid = WorstCaseRisk(s, grid=True, grid_points=points)
+        gap = grid.distance(egos, b) - np.maximum(d_box, 0.0)
+        assert np.all(gap >= -1e-6)
+        gaps.append(gap.max())
+        mismatch = np.mean(grid.risk(egos, b) != box.risk(egos, b))
+        assert mismatch <= 2.0 / points
+    assert gaps[0] > gaps[1] > gaps[2]
+    assert gaps[2] <= np.hypot(b.half_x, b.half_y) / 399 + 1e-6
+
+
+def test_signed_box_distance():
+    assert signed_box_distance(5.0, 0.0, 2.0, 1.0) == pytest.approx(3.0, abs=1e-6)
+    assert signed_box_distance(5.0, 5.0, 2.0, 1.0) == pytest.approx(5.0, abs=1e-6)
+    assert signed_box_distance(0.5, 0.0, 2.0, 1.0) == pytest.approx(-1.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", [n for n in ESTIMATOR_NAMES if n != "monte_carlo"])
+@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+def test_casadi_and_numpy_forms_agree(name, severity):
+    s = Scenario.preset("high", severity=severity)
+    beliefs = predict_array(s, MEASUREMENT)
+    est = make_estimator(name, s)
+    e, p = ca.SX.sym("e", 4), ca.SX.sym("p", Belief.SIZE)
+    f = ca.Function("f", [e, p], [est.casadi_risk(e, Belief.from_array(p))])
+    g = ca.Function("g", [e, p], [ca.gradient(est.casadi_margin(e, Belief.from_array(p), 500.0), e)])
+    rng = np.random.default_rng(8)
+    egos = np.column_stack(
+        [rng.normal(5, 7, 300), rng.normal(0, 7, 300), rng.uniform(-3, 3, 300), rng.uniform(-4, 8, 300)]
+    )
+    for n in (1, 3, 6):
+        b = beliefs[n]
+        params = np.tile(b.as_array()[:, None], (1, len(egos)))
+        sym = np.array(f.map(len(egos))(egos.T, params)).ravel()
+        np.testing.assert_allclose(sym, est.risk(egos, b), rtol=1e-10, atol=1e-9)
+        assert np.all(np.isfinite(np.array(g.map(len(egos))(egos.T, params))))
+
+
+def test_smoothed_monte_carlo_tends_to_the_hard_indicator():
+    s, b = belief("medium", 2)
+    draws = b.sample(np.random.default_rng(0), 2000)
+    ego = np.array([6.0, 1.0, 0.2, 4.0])
+    hard = float(make_estimator("monte_carlo", s).risk(ego, b, draws=draws))
+    e, d = ca.SX.sym("e", 4), ca.SX.sym("d", 2000, 3)
+    errors = []
+    for width in (0.2, 0.05, 0.005):
+        est = make_estimator("monte_carlo", s, smoothing=width)
+        f = ca.Function("f", [e, d], [est.casadi_risk(e, b, samples=d)])
+        errors.append(abs(float(f(ego, draws)) - hard))
+    assert hard > 0 and errors[0] > errors[2] and errors[2] < 0.02 * hard
+
+
+def test_worst_case_margin_relaxes_when_tolerance_exceeds_worst_severity():
+    s, b = belief("low", 2, "probability")
+    est = make_estimator("worst_case", s)
+    e = ca.SX.sym("e", 4)
+    margin = ca.Function("m", [e], [est.casadi_margin(e, b, 1.0)])
+    strict = ca.Function("m", [e], [est.casadi_margin(e, b, 0.5)])
+    inside = [float(b.x), float(b.y), 0.0, 4.0]
+    assert float(est.risk(np.array(inside), b)) == 1.0
+    assert float(margin(inside)) >= 0.0 > float(strict(inside))
+
+
+def test_bad_arguments():
+    s = Scenario()
+    with pytest.raises(ValueError, match="unknown risk estimator 'exakt'"):
+        make_estimator("exakt", s)
+    with pytest.raises(ValueError, match="rng"):
+        make_estimator("monte_carlo", s).risk(np.zeros(4), predict_array(s, MEASUREMENT)[1])
+    with pytest.raises(ValueError, match="samples"):
+        make_estimator("monte_carlo", s, samples=0)
+    with pytest.raises(ValueError, match="last axis of 4"):
+        make_estimator("exact", s).risk(np.zeros(3), predict_array(s, MEASUREMENT)[1])
