@@ -1,5 +1,11 @@
-"""RiskCrossing: the paper's crossing-object scenario, its models and risk estimators."""
+"""RiskCrossing: the paper's crossing-object scenario, its models and risk estimators.
 
+Importing the package registers ``"RiskCrossing-v0"`` with Gymnasium (safe to import twice).
+"""
+
+import gymnasium as _gym
+
+from risk_env.env import ENV_ID, OBJECT_MOTIONS, RiskCrossingEnv
 from risk_env.prediction import Belief, predict, predict_array
 from risk_env.risk import (
     ESTIMATOR_NAMES,
@@ -13,12 +19,15 @@ from risk_env.scenario import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
 from risk_env.severity import Severity, make_severity
 
 __all__ = [
+    "ENV_ID",
     "ESTIMATOR_NAMES",
+    "OBJECT_MOTIONS",
     "RISK_TOLERANCES",
     "UNCERTAINTY_PRESETS",
     "Belief",
     "ExactRisk",
     "MonteCarloRisk",
+    "RiskCrossingEnv",
     "RiskEstimator",
     "Scenario",
     "Severity",
@@ -28,3 +37,6 @@ __all__ = [
     "predict",
     "predict_array",
 ]
+
+if ENV_ID not in _gym.registry:
+    _gym.register(id=ENV_ID, entry_point="risk_env.env:RiskCrossingEnv")

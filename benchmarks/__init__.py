@@ -1,0 +1,1 @@
+"""Benchmarks: Table II, figures, timing; run each as ``python -m benchmarks.<name> --help``."""

@@ -1,0 +1,475 @@
+"""``RiskCrossing-v0``: follow a reference path while an object crosses it; every step reports
+the collision risk of the paper (Tolksdorf et al., IEEE IV 2023) in ``info`` and as a cost.
+
+The env only sequences what the rest of :mod:`risk_env` defines: the unicycle
+(:mod:`risk_env.dynamics`), the path (:mod:`risk_env.path`), the object's prediction
+(:mod:`risk_env.prediction`) and the risk estimators (:mod:`risk_env.risk`). Drawing lives in
+:mod:`risk_env.rendering`, imported only when a render mode is set.
+"""
+
+from __future__ import annotations
+
+import difflib
+import inspect
+import math
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from risk_env import dynamics, observation
+from risk_env.ops import NUMPY
+from risk_env.path import path_error_vector, project
+from risk_env.prediction import Belief, predict
+from risk_env.risk import RiskEstimator, make_estimator
+from risk_env.scenario import OVERRIDES, Scenario
+
+ENV_ID = "RiskCrossing-v0"
+OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
+"""How the object moves: ``"paper"`` (deterministic unicycle) or ``"sampled"`` (one draw per step
+from the prediction model)."""
+ACTION_TOLERANCE = 1e-6
+"""Actions may exceed the Box by this much [m/s, rad/s] (float32 rounding); they are applied as given."""
+
+_POSITION_BOUND = 1e5
+"""Bound [m] of positions, arc length and position errors in the observation Box."""
+_RATE_BOUND = 1e3
+"""Bound [m/s, rad/s] of speeds, turn rates and the speed error in the observation Box."""
+
+
+def _observation_bounds() -> np.ndarray:
+    """Upper bounds of the observation Box (the lower ones are their negatives), float32 ``(15,)``."""
+    high = np.full(observation.SIZE, _POSITION_BOUND, dtype=np.float32)
+    for index in (2, 7, 13):  # ego heading, object heading, heading error: wrapped to [-pi, pi)
+        high[index] = np.pi
+    high[observation.EGO_INPUT] = _RATE_BOUND
+    high[observation.OBJECT_INPUT] = _RATE_BOUND
+    high[14] = _RATE_BOUND  # speed error
+    return high
+
+
+class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
+    """An ego vehicle follows a reference arc while an object crosses it (paper Sec. VI-VII).
+
+    ## Description
+
+    The paper's case study: the ego, a unicycle with the exact arc update, should follow a
+    constant-curvature path to its goal at the reference speed; an object (another unicycle with
+    constant inputs) crosses the path. The object's next position and speed are uncertain: the
+    prediction model (:func:`risk_env.predict`) gives truncated Gaussians around its predicted
+    mean. Each step reports the collision risk ``R = E[I_C s]`` of the step just taken, with the
+    estimator chosen at construction, in ``info["risk"]`` and ``info["cost"]`` (a constraint cost
+    for safe RL; the risk tolerance epsilon is ``scenario.risk_tolerance``). All numbers come
+    from one :class:`~risk_env.scenario.Scenario` (``env.unwrapped.scenario``).
+
+    ## Action Space
+
+    ``Box(low=(v_min, -omega_max), high=(v_max, omega_max), shape=(2,), float32)``, physical units:
+
+    | index | action | unit | default bounds |
+    | --- | --- | --- | --- |
+    | 0 | ego speed v | m/s | [-4, 8] (``v_min``, ``v_max``; negative reverses) |
+    | 1 | ego turn rate omega | rad/s | [-0.8, 0.8] (``omega_max``) |
+
+    The env clips nothing: an action outside the Box (by more than 1e-6), with a NaN or of a shape
+    other than ``(2,)`` raises ``ValueError``. The rate limits ``accel_max`` and
+    ``omega_rate_max`` of the scenario are **not** enforced by the env; the MPC agents respect
+    them themselves.
+
+    ## Observation Space
+
+    ``Box((15,), float32)`` with finite bounds (1e5 for positions, arc length and position
+    errors, pi for headings, 1e3 for speeds and turn rates); the layout is
+    :mod:`risk_env.observation` (``RiskCrossingEnv.observation_slices`` names its parts):
+
+    | index | observation | unit |
+    | --- | --- | --- |
+    | 0, 1, 2 | ego pose c1, c2, theta (wrapped to [-pi, pi)) | m, m, rad |
+    | 3, 4 | ego's last applied input v, omega | m/s, rad/s |
+    | 5, 6, 7 | object's measured pose c1, c2, theta (wrapped) | m, m, rad |
+    | 8, 9 | object's measured inputs v, omega | m/s, rad/s |
+    | 10 | lambda: arc length of the ego's closest path point (goal at 0) | m |
+    | 11..14 | path error e = (c1 - c1_P, c2 - c2_P, theta - theta_P, v - v_ref) at lambda | m, m, rad, m/s |
+
+    The object is measured exactly; its uncertainty is that of its *future*.
+
+    ## Transition
+
+    ``step(action)`` is a fixed sequence:
+
+    1. validate the action;
+    2. the ego moves: the unicycle of :mod:`risk_env.dynamics` (the map of
+       :func:`risk_env.dynamics.step`) over ``dt`` with ``(v, omega)``;
+    3. the object moves. The belief ``B = predict(scenario, measurement_k, steps=1)[1]`` is made
+       from the object's measurement *before* it moves. ``object_motion="paper"`` (default): the
+       object follows its unicycle with the scenario's constant inputs, which is exactly B's
+       mean. ``"sampled"``: its next (c1, c2, v) is one draw from B (``self.np_random``), its
+       heading advances with the mean model, and the drawn v becomes its measured speed, so the
+       reported risk is exactly the expected severity of what then happens;
+    4. risk ``R_{k+1|k}``: B evaluated by the estimator at the ego's new state
+       ``(c1, c2, theta, v)`` with v the applied speed (Monte Carlo draws from ``self.np_random``);
+    5. reward terms, termination, truncation, observation, info.
+
+    ## Rewards
+
+    ``reward = sum(info["rewards"].values())`` with the named terms
+
+    - ``"path_error"``: ``-||e_{k+1}||``, the norm of the path error after the step (so the
+      return is minus the paper's accumulated error e_acc, without the start state's term);
+    - ``"risk"``: ``-reward_risk_weight * R_{k+1|k}`` (0 by default: the risk is a cost).
+
+    ## Starting State
+
+    Deterministic: the ego at ``scenario.ego.start`` with ``scenario.ego.initial_input`` as its
+    last input (at rest by default), the object at ``scenario.object.start`` with its constant
+    inputs ``(object.speed, object.turn_rate)``. A seed only seeds ``self.np_random``.
+
+    ## Episode End
+
+    - terminated: a collision (centre distance <= r_e + r_o), or the goal is reached (the
+      closest path point has ``lambda >= lambda_g``; ``info["is_success"]`` is True when the
+      goal is reached without a collision);
+    - truncated: after ``scenario.max_steps`` steps (80 by default).
+
+    Stepping on after the episode has ended is not guarded; call ``reset``.
+
+    ## Arguments
+
+    ``gym.make("RiskCrossing-v0", uncertainty="low", risk_tolerance=0.0, risk_estimator="exact",
+    object_motion="paper", reward_risk_weight=0.0, render_mode=None, **overrides)``
+
+    - ``uncertainty``: the paper's Table I preset, ``"low"`` (default), ``"medium"`` or ``"high"``;
+    - ``risk_tolerance``: epsilon [J for the paper's severity]; ``info["risk_violation"]`` is
+      ``risk > epsilon``;
+    - ``risk_estimator``: ``"exact"`` (default), ``"monte_carlo"`` (J = ``mc_samples``),
+      ``"worst_case"`` or ``"grid"`` (:data:`risk_env.ESTIMATOR_NAMES`);
+    - ``object_motion``: ``"paper"`` or ``"sampled"`` (see Transition);
+    - ``reward_risk_weight``: w >= 0 of the reward's risk term;
+    - ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"`` (pygame; see
+      :mod:`risk_env.rendering`);
+    - ``**overrides``: flat scenario parameters, :data:`risk_env.scenario.OVERRIDES`, e.g.
+      ``object_speed=2.5, v_ref=3.0, severity="plastic", max_steps=60``;
+    - ``scenario``: a whole :class:`~risk_env.scenario.Scenario` instead of ``uncertainty``,
+      ``risk_tolerance`` and the overrides (giving both raises ``TypeError``).
+
+    ## Info
+
+    Returned by ``step`` (and by ``reset``, with ``risk`` 0, ``risk_violation`` False and the
+    reward terms 0):
+
+    | key | value |
+    | --- | --- |
+    | ``risk``, ``cost`` | R_{k+1|k} (float) |
+    | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
+    | ``collision`` | ``distance <= r_e + r_o`` (bool) |
+    | ``distance`` | centre distance ego-object after the step [m] (float) |
+    | ``path_error`` | e at the closest path point, ``(4,)`` float64 |
+    | ``lambda`` | arc length of the closest path point [m] (float) |
+    | ``ego``, ``object`` | true ``(c1, c2, theta, v)``, ``(4,)`` float64 (headings unwrapped) |
+    | ``rewards`` | the named reward terms (dict of float) |
+    | ``is_success`` | goal reached without a collision (bool) |
+
+    ## Example
+
+    >>> import gymnasium as gym
+    >>> import risk_env
+    >>> env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=500.0, v_ref=3.0)
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step(np.array([3.0, 0.0], dtype=np.float32))
+    >>> obs.shape, info["risk"] >= 0.0
+    ((15,), True)
+
+    ## Version History
+
+    - v0: initial version.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 2.0}
+    observation_slices: dict[str, slice] = observation.SLICES
+    """Names of the observation's parts (:data:`risk_env.observation.SLICES`)."""
+
+    def __init__(
+        self,
+        uncertainty: str | None = None,
+        risk_tolerance: float | None = None,
+        risk_estimator: str = "exact",
+        render_mode: str | None = None,
+        object_motion: str = "paper",
+        reward_risk_weight: float = 0.0,
+        scenario: Scenario | None = None,
+        **overrides: Any,
+    ) -> None:
+        self.scenario: Scenario = _build_scenario(uncertainty, risk_tolerance, scenario, overrides)
+        """The scenario in use; its ``risk_tolerance`` is the env's epsilon."""
+        if object_motion not in OBJECT_MOTIONS:
+            raise ValueError(f"unknown object_motion {object_motion!r}; expected one of {OBJECT_MOTIONS}")
+        self.object_motion = object_motion
+        weight = float(reward_risk_weight)
+        if not (math.isfinite(weight) and weight >= 0.0):
+            raise ValueError(f"reward_risk_weight must be finite and >= 0, got {reward_risk_weight!r}")
+        self.reward_risk_weight = weight
+        self.estimator: RiskEstimator = make_estimator(risk_estimator, self.scenario)
+        """The risk estimator that reports ``info["risk"]``."""
+        modes = self.metadata["render_modes"]
+        if render_mode is not None and render_mode not in modes:
+            raise ValueError(f"unknown render_mode {render_mode!r}; expected None or one of {modes}")
+        self.render_mode = render_mode
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.scenario.dt}
+
+        ego = self.scenario.ego
+        self.action_space = spaces.Box(
+            low=np.array([ego.v_min, -ego.omega_max], dtype=np.float32),
+            high=np.array([ego.v_max, ego.omega_max], dtype=np.float32),
+            dtype=np.float32,
+        )
+        high = _observation_bounds()
+        self.observation_space = spaces.Box(low=-high, high=high, dtype=np.float32)
+
+        self._ego_pose: tuple[float, float, float] = self.scenario.ego.start.as_tuple()  # unwrapped
+        self._ego_input: tuple[float, float] = ego.initial_input
+        self._object: tuple[float, float, float, float, float] | None = None  # c1, c2, theta, v, omega
+        self._steps = 0
+        self._plan: np.ndarray | None = None
+        self._last_risk = 0.0
+        self._renderer: Any = None
+
+    # ---------------------------------------------------------------- properties
+    @property
+    def epsilon(self) -> float:
+        """The risk tolerance epsilon (``scenario.risk_tolerance``)."""
+        return self.scenario.risk_tolerance
+
+    @property
+    def dt(self) -> float:
+        """The sample time T [s]."""
+        return self.scenario.dt
+
+    @property
+    def steps(self) -> int:
+        """Steps taken in the current episode."""
+        return self._steps
+
+    @property
+    def object_measurement(self) -> np.ndarray:
+        """The object's current measurement ``(c1, c2, theta, v, omega)``, as :func:`predict` takes it."""
+        self._require_reset()
+        return np.array(self._object, dtype=float)
+
+    @property
+    def plan(self) -> np.ndarray | None:
+        """The planned ego positions set by :meth:`set_plan` ``(M, 2)`` [m], or None."""
+        return None if self._plan is None else self._plan.copy()
+
+    # ---------------------------------------------------------------- gym API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a new episode (deterministic start state); ``options`` takes no keys."""
+        super().reset(seed=seed)
+        if options:
+            raise ValueError(f"RiskCrossing-v0 takes no reset options, got {sorted(options)}")
+        s = self.scenario
+        self._ego_pose = s.ego.start.as_tuple()
+        self._ego_input = s.ego.initial_input
+        self._object = (*s.object.start.as_tuple(), s.object.speed, s.object.turn_rate)
+        self._steps = 0
+        self._plan = None
+        self._last_risk = 0.0
+        obs, info, _ = self._observe(risk=0.0, stepped=False)
+        if self.render_mode == "human":
+            self.render()
+        return obs, info
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Apply ``action = (v [m/s], omega [rad/s])`` for one sample time (see the class docstring)."""
+        self._require_reset()
+        s = self.scenario
+        v, omega = self._check_action(action)
+        # 1. the ego moves (dynamics.step's unicycle, called on floats: no array round trip)
+        x, y, theta = dynamics.unicycle_step(*self._ego_pose, v, omega, s.dt, NUMPY)
+        self._ego_pose = (float(x), float(y), float(theta))
+        self._ego_input = (v, omega)
+        # 2. the object moves; B = its one-step belief from the measurement before the move
+        belief = predict(s, self._object, steps=1)[1]
+        self._object = self._move_object(belief)
+        # 3. the risk R_{k+1|k} of the ego's new state against B
+        ego_state = np.array((*self._ego_pose, v))
+        risk = float(self.estimator.risk(ego_state, belief, rng=self.np_random))
+        self._last_risk = risk
+        self._steps += 1
+        # 4. reward terms, episode end, observation, info
+        obs, info, goal = self._observe(risk, stepped=True)
+        reward = sum(info["rewards"].values())
+        terminated = info["collision"] or goal
+        truncated = self._steps >= s.max_steps
+        if self.render_mode == "human":
+            self.render()
+        return obs, reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """``"rgb_array"``: the frame ``(H, W, 3)`` uint8; ``"human"``: draw to the window."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' to"
+                f' gym.make("{ENV_ID}", ...)'
+            )
+            return None
+        self._require_reset()
+        if self._renderer is None:
+            from risk_env.rendering import Renderer
+
+            self._renderer = Renderer(self.scenario, self.render_mode, fps=self.metadata["render_fps"])
+        ego_x, ego_y, _ = self._ego_pose
+        lam = float(project(self.scenario.path, ego_x, ego_y))
+        return self._renderer.render(
+            ego_pose=np.array(self._ego_pose),
+            ego_speed=self._ego_input[0],
+            object_measurement=np.array(self._object, dtype=float),
+            plan=self._plan,
+            status=(
+                f"k = {self._steps}  t = {self._steps * self.scenario.dt:.1f} s",
+                f"risk = {self._last_risk:.4g}  (eps = {self.epsilon:g})",
+                f"lambda = {lam:.1f} m",
+            ),
+        )
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # ---------------------------------------------------------------- extras
+    def set_plan(self, xy: np.ndarray | None) -> None:
+        """Show a planned ego trajectory ``(M, 2)`` positions [m] in renders; None clears it.
+
+        For benchmarks and demos only (agents read observations and never call this); the plan
+        has no effect on the dynamics and is cleared by ``reset``.
+        """
+        if xy is None:
+            self._plan = None
+            return
+        plan = np.array(xy, dtype=float)
+        if plan.ndim != 2 or plan.shape[1] != 2 or plan.shape[0] < 1:
+            raise ValueError(f"plan must have shape (M, 2) of positions [m], got {plan.shape}")
+        if not np.all(np.isfinite(plan)):
+            raise ValueError(f"plan has non-finite entries: {plan}")
+        self._plan = plan
+
+    # ---------------------------------------------------------------- internals
+    def _require_reset(self) -> None:
+        if self._object is None:
+            raise gym.error.ResetNeeded("call env.reset() before env.step() or env.render()")
+
+    def _check_action(self, action: Any) -> tuple[float, float]:
+        """The action as ``(v, omega)`` floats; raises ``ValueError`` on anything the Box rejects."""
+        try:
+            a = np.asarray(action, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"action must be 2 numbers (v [m/s], omega [rad/s]), got {action!r}") from None
+        if a.shape != (2,):
+            raise ValueError(
+                f"action must have shape (2,) = (v [m/s], omega [rad/s]), got shape {a.shape}: {action!r}"
+            )
+        v, omega = float(a[0]), float(a[1])
+        if not (math.isfinite(v) and math.isfinite(omega)):
+            raise ValueError(f"action must be finite, got (v, omega) = ({v}, {omega})")
+        ego = self.scenario.ego
+        if not ego.v_min - ACTION_TOLERANCE <= v <= ego.v_max + ACTION_TOLERANCE:
+            raise ValueError(
+                f"action v = {v} m/s lies outside [v_min, v_max] = [{ego.v_min}, {ego.v_max}]"
+                " (the env clips nothing)"
+            )
+        if not abs(omega) <= ego.omega_max + ACTION_TOLERANCE:
+            raise ValueError(
+                f"action omega = {omega} rad/s lies outside [-omega_max, omega_max] ="
+                f" [{-ego.omega_max}, {ego.omega_max}] (the env clips nothing)"
+            )
+        return v, omega
+
+    def _move_object(self, belief: Belief) -> tuple[float, float, float, float, float]:
+        """The object's next measurement ``(c1, c2, theta, v, omega)`` given its one-step belief."""
+        _, _, _, speed, omega = self._object
+        if self.object_motion == "paper":
+            # B's mean is the object's unicycle step with its constant inputs.
+            return (float(belief.x), float(belief.y), float(belief.theta), speed, omega)
+        cx, cy, v = belief.sample(self.np_random)
+        return (float(cx), float(cy), float(belief.theta), float(v), omega)
+
+    def _observe(self, risk: float, stepped: bool) -> tuple[np.ndarray, dict[str, Any], bool]:
+        """Observation, info and whether the goal is reached; the reward terms are 0 at reset."""
+        s = self.scenario
+        x, y, theta = self._ego_pose
+        v, omega = self._ego_input
+        ox, oy, otheta, ov, oomega = self._object
+        error, lam = path_error_vector(s.path, self._ego_pose, v, s.ego.v_ref)
+        rewards = {
+            "path_error": 0.0 - math.sqrt(float(error @ error)) if stepped else 0.0,
+            "risk": 0.0 - self.reward_risk_weight * risk if stepped else 0.0,
+        }
+        wrap = NUMPY.wrap_angle
+        obs = np.array(
+            (x, y, wrap(theta), v, omega, ox, oy, wrap(otheta), ov, oomega, lam, *error), dtype=np.float32
+        )
+        distance = math.hypot(x - ox, y - oy)
+        collision = distance <= s.collision_distance
+        goal = lam >= s.path.lambda_goal
+        info = {
+            "risk": risk,
+            "cost": risk,
+            "risk_violation": risk > s.risk_tolerance,
+            "collision": collision,
+            "distance": distance,
+            "path_error": error,
+            "lambda": lam,
+            "ego": np.array((x, y, theta, v)),
+            "object": np.array((ox, oy, otheta, ov)),
+            "rewards": rewards,
+            "is_success": goal and not collision,
+        }
+        return obs, info, goal
+
+
+def _build_scenario(
+    uncertainty: str | None,
+    risk_tolerance: float | None,
+    scenario: Scenario | None,
+    overrides: dict[str, Any],
+) -> Scenario:
+    """The env's scenario from either ``scenario`` or a preset with overrides; clear errors."""
+    unknown = [name for name in overrides if name not in OVERRIDES]
+    if unknown:
+        known = [*OVERRIDES, *_ENV_ARGUMENTS]
+        hints = []
+        for name in unknown:
+            close = difflib.get_close_matches(name, known, n=3)
+            hints.append(f"{name!r}" + (f" (did you mean {', '.join(close)}?)" if close else ""))
+        raise TypeError(
+            f"RiskCrossingEnv got unknown keyword argument(s) {', '.join(hints)}. Env arguments:"
+            f" {sorted(_ENV_ARGUMENTS)}; scenario parameters: {sorted(OVERRIDES)}"
+        )
+    if scenario is not None:
+        if not isinstance(scenario, Scenario):
+            raise TypeError(f"scenario must be a risk_env.Scenario, got {type(scenario).__name__}")
+        given = [
+            name
+            for name, value in (("uncertainty", uncertainty), ("risk_tolerance", risk_tolerance))
+            if value is not None
+        ]
+        given += sorted(overrides)
+        if given:
+            raise TypeError(
+                f"pass either scenario= or uncertainty/risk_tolerance/scenario parameters, not both;"
+                f" got scenario= and {given}. Use scenario.replace(...) to change a scenario."
+            )
+        return scenario
+    if risk_tolerance is not None:
+        overrides = {**overrides, "risk_tolerance": risk_tolerance}
+    return Scenario.preset("low" if uncertainty is None else uncertainty, **overrides)
+
+
+_ENV_ARGUMENTS: tuple[str, ...] = tuple(
+    name
+    for name in inspect.signature(RiskCrossingEnv.__init__).parameters
+    if name not in ("self", "overrides")
+)

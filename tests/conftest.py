@@ -1,0 +1,17 @@
+"""Shared fixtures. Rendering runs headless: SDL's video driver defaults to ``dummy``."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+import pytest  # noqa: E402
+
+from risk_env.scenario import Scenario  # noqa: E402
+
+
+@pytest.fixture
+def short_scenario() -> Scenario:
+    """The paper's low-uncertainty scenario with a short horizon and episode (fast tests)."""
+    return Scenario.preset("low", horizon=3, max_steps=12)
