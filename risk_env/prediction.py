@@ -75,10 +75,11 @@ class Belief:
     def sample(self, rng: np.random.Generator, size: int | tuple[int, ...] = ()) -> np.ndarray:
         """Draws ``(size..., batch..., 3)`` of (c1 [m], c2 [m], v [m/s]) from ``rng``."""
         size = (size,) if isinstance(size, int) else tuple(size)
-        cx = truncnorm_sample(self.x, self.sigma_x, self.x - self.half_x, self.x + self.half_x, rng, size)
-        cy = truncnorm_sample(self.y, self.sigma_y, self.y - self.half_y, self.y + self.half_y, rng, size)
-        v = truncnorm_sample(self.speed, self.sigma_v, self.v_lo, self.v_hi, rng, size)
-        return np.stack([cx, cy, v], axis=-1)
+        mean = np.stack(np.broadcast_arrays(self.x, self.y, self.speed), axis=-1)
+        sigma = np.stack(np.broadcast_arrays(self.sigma_x, self.sigma_y, self.sigma_v), axis=-1)
+        lo = np.stack(np.broadcast_arrays(self.x - self.half_x, self.y - self.half_y, self.v_lo), axis=-1)
+        hi = np.stack(np.broadcast_arrays(self.x + self.half_x, self.y + self.half_y, self.v_hi), axis=-1)
+        return truncnorm_sample(mean, sigma, lo, hi, rng, size)
 
 
 def predict(

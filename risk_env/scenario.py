@@ -280,6 +280,13 @@ class Scenario:
         _positive("risk_tolerance", self.risk_tolerance, strict=False)
         if self.severity not in SEVERITY_NAMES:
             raise ValueError(f"unknown severity {self.severity!r}; expected one of {SEVERITY_NAMES}")
+        v_lo, v_hi = self.uncertainty.velocity_bounds0
+        if not v_lo <= self.object.speed <= v_hi:
+            raise ValueError(
+                f"object.speed {self.object.speed} m/s lies outside the speed truncation interval"
+                f" uncertainty.velocity_bounds0 = {(v_lo, v_hi)}: the prediction's mean would fall outside"
+                " its own support; widen velocity_bounds0"
+            )
         if abs(self.path.curvature) > self.ego.omega_max / max(self.ego.v_ref, 1e-9):
             raise ValueError(
                 f"path.curvature {self.path.curvature} needs a turn rate above ego.omega_max at"
