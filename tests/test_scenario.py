@@ -67,6 +67,7 @@ def test_frozen():
         ({"curvature": 0.5}, "curvature"),
         ({"grid_points": 1}, "grid_points"),
         ({"mc_samples": 0}, "mc_samples"),
+        ({"object_speed": 9.0}, "object.speed"),
     ],
 )
 def test_bad_values_name_the_field(overrides, message):

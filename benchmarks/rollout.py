@@ -1,0 +1,99 @@
+"""One rollout loop for every agent: anything with SB3's ``predict`` runs in ``RiskCrossing-v0``."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+
+@dataclass
+class EpisodeRecord:
+    """What happened in one episode. Arrays over time steps k = 0..steps (states) or 0..steps-1."""
+
+    ego: np.ndarray
+    """(steps+1, 4) ego (c1 [m], c2 [m], theta [rad], v [m/s])."""
+    object: np.ndarray
+    """(steps+1, 4) object (c1, c2, theta, v)."""
+    actions: np.ndarray
+    """(steps, 2) applied (v [m/s], omega [rad/s])."""
+    risk: np.ndarray
+    """(steps,) R_{k+1|k} as the env reported it."""
+    path_error: np.ndarray
+    """(steps+1, 4) e_k, the first at the start state."""
+    distance: np.ndarray
+    """(steps+1,) centre distance ego-object [m]."""
+    solve_time: np.ndarray
+    """(steps,) agent's solve (or predict) time [s]."""
+    fallback: np.ndarray
+    """(steps,) whether the agent's solver failed and it fell back."""
+    collision: bool
+    success: bool
+    epsilon: float
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def steps(self) -> int:
+        return len(self.actions)
+
+    @property
+    def e_acc(self) -> float:
+        """Accumulated path error sum_k ||e_k|| over the episode (paper Sec. VII)."""
+        return float(np.linalg.norm(self.path_error, axis=1).sum())
+
+    @property
+    def d_min(self) -> float:
+        """Smallest centre distance ego-object [m]."""
+        return float(self.distance.min())
+
+    @property
+    def failures(self) -> int:
+        return int(self.fallback.sum())
+
+    @property
+    def violation_rate(self) -> float:
+        """Share of steps whose reported risk exceeded epsilon (by more than 1e-6 relative)."""
+        return float(np.mean(self.risk > self.epsilon * (1 + 1e-6) + 1e-9)) if self.steps else 0.0
+
+
+def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
+    """Run one episode of ``agent`` (anything with ``predict(obs) -> (action, state)``) in ``env``."""
+    obs, info = env.reset(seed=seed)
+    if hasattr(agent, "reset"):
+        agent.reset()
+    ego, obj = [info["ego"]], [info["object"]]
+    errors, dist = [info["path_error"]], [info["distance"]]
+    actions, risks, times, fallbacks = [], [], [], []
+    state, start = None, True
+    terminated = truncated = False
+    while not (terminated or truncated):
+        t0 = time.perf_counter()
+        action, state = agent.predict(obs, state=state, episode_start=np.array([start]), deterministic=True)
+        elapsed = time.perf_counter() - t0
+        start = False
+        report = getattr(agent, "last_solve", None)
+        times.append(getattr(report, "solve_time", elapsed) if report is not None else elapsed)
+        fallbacks.append(bool(getattr(report, "fallback", False)) if report is not None else False)
+        obs, _, terminated, truncated, info = env.step(action)
+        actions.append(np.asarray(action, dtype=float).reshape(2))
+        risks.append(info["risk"])
+        ego.append(info["ego"])
+        obj.append(info["object"])
+        errors.append(info["path_error"])
+        dist.append(info["distance"])
+    return EpisodeRecord(
+        ego=np.array(ego),
+        object=np.array(obj),
+        actions=np.array(actions).reshape(-1, 2),
+        risk=np.array(risks),
+        path_error=np.array(errors),
+        distance=np.array(dist),
+        solve_time=np.array(times),
+        fallback=np.array(fallbacks, dtype=bool),
+        collision=bool(info.get("collision", False)),
+        success=bool(info.get("is_success", False)),
+        epsilon=float(env.unwrapped.scenario.risk_tolerance),
+    )

@@ -1,0 +1,351 @@
+"""The paper's Table II: RMPC and SMPC x low/medium/high uncertainty x six risk tolerances.
+
+    python -m benchmarks.table2                      # all risk methods, results/ folder
+    python -m benchmarks.table2 --methods rmpc:worst_case,smpc:exact --uncertainty low
+
+Writes ``table2.csv`` (one row per run), ``table2.md`` (our figures beside the paper's, the claims
+checklist, timing), ``table2_runs.npz`` (every trajectory) and the Fig. 3/4 PNGs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.paper_table2 import PAPER, TOLERANCES
+from benchmarks.rollout import EpisodeRecord, rollout
+from benchmarks.sweep import run_sweep
+
+METHODS: dict[str, tuple[str, str]] = {
+    "rmpc:worst_case": ("RMPC", "worst_case"),
+    "rmpc:grid": ("RMPC", "grid"),
+    "smpc:exact": ("SMPC", "exact"),
+    "smpc:monte_carlo": ("SMPC", "monte_carlo"),
+}
+LEVELS = ("low", "medium", "high")
+CSV_COLUMNS = (
+    "method",
+    "risk_method",
+    "uncertainty",
+    "epsilon",
+    "severity",
+    "e_acc",
+    "d_min",
+    "collided",
+    "reached_goal",
+    "steps",
+    "failed_solves",
+    "solve_ms_median",
+    "solve_ms_p95",
+    "solve_ms_max",
+    "max_risk",
+    "wall_s",
+    "paper_e_acc",
+    "paper_d_min",
+)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One closed-loop run of the case study."""
+
+    method: str
+    risk_method: str
+    uncertainty: str
+    epsilon: float
+    overrides: tuple[tuple[str, Any], ...] = ()
+    seed: int = 0
+    agent_options: tuple[tuple[str, Any], ...] = field(default=())
+
+    @property
+    def label(self) -> str:
+        return f"{self.method}/{self.risk_method}/{self.uncertainty}/eps={self.epsilon:g}"
+
+
+def make_agent(spec: RunSpec, env: Any) -> Any:
+    """The agent a spec names, built for the env's scenario (agents read only observations)."""
+    from agents import RMPC, SMPC
+
+    options = dict(spec.agent_options)
+    if spec.method == "RMPC":
+        return RMPC.from_env(env, risk=spec.risk_method, **options)
+    return SMPC.from_env(env, risk=spec.risk_method, seed=spec.seed, **options)
+
+
+def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Run one spec: a CSV row and the trajectory arrays."""
+    import gymnasium as gym
+
+    import risk_env  # noqa: F401  (registers the env)
+
+    t0 = time.perf_counter()
+    env = gym.make(
+        "RiskCrossing-v0", uncertainty=spec.uncertainty, risk_tolerance=spec.epsilon, **dict(spec.overrides)
+    )
+    agent = make_agent(spec, env)
+    record: EpisodeRecord = rollout(agent, env, seed=spec.seed)
+    env.close()
+    scenario = env.unwrapped.scenario
+    paper = PAPER.get((spec.method, spec.uncertainty, spec.epsilon), (float("nan"), float("nan")))
+    solve_ms = 1e3 * record.solve_time
+    row = {
+        "method": spec.method,
+        "risk_method": spec.risk_method,
+        "uncertainty": spec.uncertainty,
+        "epsilon": spec.epsilon,
+        "severity": scenario.severity,
+        "e_acc": round(record.e_acc, 3),
+        "d_min": round(record.d_min, 3),
+        "collided": record.collision,
+        "reached_goal": record.success,
+        "steps": record.steps,
+        "failed_solves": record.failures,
+        "solve_ms_median": round(float(np.median(solve_ms)), 3),
+        "solve_ms_p95": round(float(np.percentile(solve_ms, 95)), 3),
+        "solve_ms_max": round(float(solve_ms.max()), 3),
+        "max_risk": round(float(record.risk.max()), 3),
+        "wall_s": round(time.perf_counter() - t0, 3),
+        "paper_e_acc": paper[0],
+        "paper_d_min": paper[1],
+    }
+    arrays = {"ego": record.ego, "object": record.object, "actions": record.actions, "risk": record.risk}
+    return row, arrays
+
+
+def specs_for(
+    methods: list[str], levels: list[str], tolerances: list[float], overrides: dict[str, Any], seed: int = 0
+) -> list[RunSpec]:
+    frozen = tuple(sorted(overrides.items()))
+    return [
+        RunSpec(*METHODS[m], level, eps, frozen, seed)
+        for m in methods
+        for level in levels
+        for eps in tolerances
+    ]
+
+
+# --- the paper's claims -------------------------------------------------------------------------
+
+
+def check_claims(rows: list[dict[str, Any]]) -> list[tuple[str, bool | None, str]]:
+    """Each claim of the paper's Sec. VIII as (claim, holds, evidence); None when not run."""
+    index = {(r["method"], r["risk_method"], r["uncertainty"], r["epsilon"]): r for r in rows}
+    claims: list[tuple[str, bool | None, str]] = []
+    rmpc_methods = sorted({r["risk_method"] for r in rows if r["method"] == "RMPC"})
+    smpc_methods = sorted({r["risk_method"] for r in rows if r["method"] == "SMPC"})
+    levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
+    for rm in rmpc_methods:
+        spreads = []
+        for lv in levels:
+            runs = [r for r in rows if (r["method"], r["risk_method"], r["uncertainty"]) == ("RMPC", rm, lv)]
+            if len(runs) > 1:
+                e = [r["e_acc"] for r in runs]
+                d = [r["d_min"] for r in runs]
+                spreads.append((lv, max(e) - min(e), max(d) - min(d)))
+        if spreads:
+            ok = all(de <= 0.01 * 100 and dd <= 0.05 for _, de, dd in spreads)
+            text = ", ".join(
+                f"{lv}: e_acc spread {de:.2f}, d_min spread {dd:.2f} m" for lv, de, dd in spreads
+            )
+            claims.append((f"RMPC ({rm}) does not depend on epsilon", ok, text))
+        means = [
+            np.mean(
+                [
+                    r["d_min"]
+                    for r in rows
+                    if (r["method"], r["risk_method"], r["uncertainty"]) == ("RMPC", rm, lv)
+                ]
+            )
+            for lv in levels
+        ]
+        if len(means) > 1:
+            ok = bool(np.all(np.diff(means) > 0))
+            claims.append(
+                (
+                    f"RMPC ({rm}) d_min grows with uncertainty",
+                    ok,
+                    ", ".join(f"{lv} {m:.2f} m" for lv, m in zip(levels, means)),
+                )
+            )
+    for rm in rmpc_methods:
+        for sm in smpc_methods:
+            pairs = [
+                (index[("RMPC", rm, lv, eps)], index[("SMPC", sm, lv, eps)])
+                for (meth, risk, lv, eps) in index
+                if meth == "RMPC" and risk == rm and ("SMPC", sm, lv, eps) in index
+            ]
+            if pairs:
+                e_ok = sum(s["e_acc"] <= r["e_acc"] for r, s in pairs)
+                d_ok = sum(s["d_min"] <= r["d_min"] for r, s in pairs)
+                claims.append(
+                    (
+                        f"SMPC ({sm}) below RMPC ({rm}) in e_acc and d_min",
+                        e_ok == len(pairs) and d_ok == len(pairs),
+                        f"e_acc lower in {e_ok}/{len(pairs)} runs, d_min lower in {d_ok}/{len(pairs)}",
+                    )
+                )
+    for sm in smpc_methods:
+        parts, ok = [], True
+        for lv in levels:
+            runs = sorted(
+                (r for r in rows if (r["method"], r["risk_method"], r["uncertainty"]) == ("SMPC", sm, lv)),
+                key=lambda r: r["epsilon"],
+            )
+            if len(runs) > 1:
+                d = [r["d_min"] for r in runs]
+                falls = bool(np.all(np.diff(d) <= 0.05)) and d[-1] < d[0] - 0.05
+                ok &= falls
+                parts.append(f"{lv}: " + " > ".join(f"{x:.2f}" for x in d))
+        if parts:
+            claims.append((f"SMPC ({sm}) d_min falls as epsilon grows", ok, "; ".join(parts)))
+    collided = [
+        f"{r['method']}/{r['risk_method']}/{r['uncertainty']}/{r['epsilon']:g}" for r in rows if r["collided"]
+    ]
+    claims.append(("No run collides", not collided, ", ".join(collided) or f"0 of {len(rows)} runs"))
+    return claims
+
+
+# --- reports ------------------------------------------------------------------------------------
+
+
+def markdown(
+    rows: list[dict[str, Any]], claims: list[tuple[str, bool | None, str]], wall: dict[str, float]
+) -> str:
+    lines = ["# Table II: ours beside the paper's", ""]
+    lines.append("Each cell: ours (paper). e_acc = sum of ||e_k||; d_min [m]. `*` marks a collision.")
+    groups = sorted({(r["method"], r["risk_method"]) for r in rows}, key=lambda g: (g[0], g[1]))
+    levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
+    for method, risk in groups:
+        lines += ["", f"## {method}, risk: {risk}", ""]
+        header = "| eps | " + " | ".join(f"{lv} e_acc | {lv} d_min" for lv in levels) + " |"
+        lines += [header, "|" + " --- |" * (1 + 2 * len(levels))]
+        for eps in sorted({r["epsilon"] for r in rows}):
+            cells = []
+            for lv in levels:
+                match = [
+                    r
+                    for r in rows
+                    if (r["method"], r["risk_method"], r["uncertainty"], r["epsilon"])
+                    == (method, risk, lv, eps)
+                ]
+                if not match:
+                    cells += ["", ""]
+                    continue
+                r = match[0]
+                star = "*" if r["collided"] else ""
+                cells.append(f"{r['e_acc']:.1f}{star} ({_fmt(r['paper_e_acc'])})")
+                cells.append(f"{r['d_min']:.1f}{star} ({_fmt(r['paper_d_min'])})")
+            lines.append(f"| {eps:g} | " + " | ".join(cells) + " |")
+    lines += ["", "## The paper's claims", ""]
+    for claim, ok, evidence in claims:
+        verdict = "holds" if ok else ("not run" if ok is None else "**does not hold**")
+        lines.append(f"- {claim}: {verdict} ({evidence})")
+    lines += ["", "## Timing", ""]
+    lines.append(
+        "| method | risk | runs | wall [s] | solve median [ms] | solve p95 [ms] | solve max [ms] | failed |"
+    )
+    lines.append("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for method, risk in groups:
+        sel = [r for r in rows if (r["method"], r["risk_method"]) == (method, risk)]
+        lines.append(
+            f"| {method} | {risk} | {len(sel)} | {wall.get(f'{method}:{risk}', float('nan')):.1f} | "
+            f"{np.median([r['solve_ms_median'] for r in sel]):.1f} | {max(r['solve_ms_p95'] for r in sel):.1f} | "
+            f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(x: float) -> str:
+    return "-" if x != x else f"{x:.1f}"
+
+
+def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.table2", description=__doc__.split("\n\n")[0])
+    p.add_argument("--methods", default=",".join(METHODS), help=f"comma list of {', '.join(METHODS)}")
+    p.add_argument("--uncertainty", default="low,medium,high", help="comma list of low, medium, high")
+    p.add_argument(
+        "--tolerances", default=",".join(f"{t:g}" for t in TOLERANCES), help="comma list of epsilon [J]"
+    )
+    p.add_argument(
+        "--v-ref", type=float, default=None, help="reference speed [m/s] (default: the Scenario's, 4)"
+    )
+    p.add_argument("--severity", default=None, help="paper, plastic or probability (default: paper)")
+    p.add_argument("--out", type=Path, default=Path("results"), help="output folder (default: results/)")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS", help="run on Ray")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    args = p.parse_args(argv)
+    args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = [m for m in args.methods if m not in METHODS]
+    if unknown:
+        p.error(f"unknown method(s) {unknown}; expected from {list(METHODS)}")
+    args.uncertainty = [u.strip() for u in args.uncertainty.split(",") if u.strip()]
+    bad = [u for u in args.uncertainty if u not in LEVELS]
+    if bad:
+        p.error(f"unknown uncertainty {bad}; expected from {list(LEVELS)}")
+    try:
+        args.tolerances = [float(t) for t in args.tolerances.split(",") if t.strip()]
+    except ValueError:
+        p.error(f"--tolerances must be numbers, got {args.tolerances!r}")
+    if any(t < 0 for t in args.tolerances):
+        p.error("--tolerances must be >= 0")
+    return args
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    args = parse_args(argv)
+    overrides: dict[str, Any] = {}
+    if args.v_ref is not None:
+        overrides["v_ref"] = args.v_ref
+    if args.severity is not None:
+        overrides["severity"] = args.severity
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict[str, Any]] = []
+    arrays: dict[str, np.ndarray] = {}
+    wall: dict[str, float] = {}
+    for method in args.methods:
+        specs = specs_for([method], args.uncertainty, args.tolerances, overrides)
+        t0 = time.perf_counter()
+        results = run_sweep(run_one, specs, args.workers, args.ray, desc=method)
+        wall[":".join(METHODS[method])] = time.perf_counter() - t0
+        for spec, (row, arr) in zip(specs, results):
+            rows.append(row)
+            for key, value in arr.items():
+                arrays[f"{spec.label}/{key}"] = value
+        write_csv(rows, args.out / "table2.csv")  # keep what is done if a later method fails
+    claims = check_claims(rows)
+    (args.out / "table2.md").write_text(markdown(rows, claims, wall))
+    np.savez_compressed(args.out / "table2_runs.npz", **arrays)
+    (args.out / "table2_meta.json").write_text(
+        json.dumps({"wall_s": wall, "args": _jsonable(vars(args))}, indent=2)
+    )
+    written = [args.out / "table2.csv", args.out / "table2.md", args.out / "table2_runs.npz"]
+    if not args.no_figures:
+        from benchmarks.figures import paper_figures
+
+        written += paper_figures(rows, arrays, args.out)
+    print(markdown(rows, claims, wall))
+    print("Wrote:\n" + "\n".join(f"  {p}" for p in written))
+    return rows
+
+
+def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (str(v) if isinstance(v, Path) else v) for k, v in d.items()}
+
+
+if __name__ == "__main__":
+    main()
