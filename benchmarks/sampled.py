@@ -161,9 +161,11 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         lines.append(
             f"| {r['agent']} | {r['severity']} | {r['uncertainty']} | {r['epsilon']:g} | {r['episodes']} | "
-            f"{100 * r['collision_rate']:.1f}% [{100 * r['collision_ci_low']:.1f}, {100 * r['collision_ci_high']:.1f}] | "
+            f"{100 * r['collision_rate']:.1f}% "
+            f"[{100 * r['collision_ci_low']:.1f}, {100 * r['collision_ci_high']:.1f}] | "
             f"{r['risk_mean']:.3g} | {r['risk_p95']:.3g} | {100 * r['violation_rate']:.1f}% | "
-            f"{r['harm_per_step']:.3g} | {r['e_acc_mean']:.1f} | {r['d_min_mean']:.1f} ({r['d_min_min']:.1f}) | "
+            f"{r['harm_per_step']:.3g} | {r['e_acc_mean']:.1f} | "
+            f"{r['d_min_mean']:.1f} ({r['d_min_min']:.1f}) | "
             f"{100 * r['goal_rate']:.0f}% | {r['failed_solves']} |"
         )
     return "\n".join(lines) + "\n"

@@ -148,9 +148,10 @@ def check_claims(rows: list[dict[str, Any]]) -> list[tuple[str, bool | None, str
             if len(runs) > 1:
                 e = [r["e_acc"] for r in runs]
                 d = [r["d_min"] for r in runs]
-                spreads.append((lv, max(e) - min(e), max(d) - min(d)))
+                spreads.append((lv, max(e) - min(e), max(d) - min(d), float(np.mean(e))))
         if spreads:
-            ok = all(de <= 0.01 * 100 and dd <= 0.05 for _, de, dd in spreads)
+            # within 1 % of e_acc and 5 cm of d_min: the solver's tolerance, not a behaviour change
+            ok = all(de <= 0.01 * mean_e and dd <= 0.05 for _, de, dd, mean_e in spreads)
             text = ", ".join(
                 f"{lv}: e_acc spread {de:.2f}, d_min spread {dd:.2f} m" for lv, de, dd in spreads
             )
@@ -256,7 +257,8 @@ def markdown(
         sel = [r for r in rows if (r["method"], r["risk_method"]) == (method, risk)]
         lines.append(
             f"| {method} | {risk} | {len(sel)} | {wall.get(f'{method}:{risk}', float('nan')):.1f} | "
-            f"{np.median([r['solve_ms_median'] for r in sel]):.1f} | {max(r['solve_ms_p95'] for r in sel):.1f} | "
+            f"{np.median([r['solve_ms_median'] for r in sel]):.1f} | "
+            f"{max(r['solve_ms_p95'] for r in sel):.1f} | "
             f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)} |"
         )
     return "\n".join(lines) + "\n"
