@@ -153,7 +153,7 @@ def check_claims(rows: list[dict[str, Any]]) -> list[tuple[str, bool | None, str
             # within 1 % of e_acc and 5 cm of d_min: the solver's tolerance, not a behaviour change
             ok = all(de <= 0.01 * mean_e and dd <= 0.05 for _, de, dd, mean_e in spreads)
             text = ", ".join(
-                f"{lv}: e_acc spread {de:.2f}, d_min spread {dd:.2f} m" for lv, de, dd in spreads
+                f"{lv}: e_acc spread {de:.2f}, d_min spread {dd:.2f} m" for lv, de, dd, _ in spreads
             )
             claims.append((f"RMPC ({rm}) does not depend on epsilon", ok, text))
         means = [

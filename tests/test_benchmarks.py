@@ -1,0 +1,141 @@
+"""Fast runs of the benchmark CLIs on tiny subsets (the full Table II is marked slow)."""
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import sampled, table2
+from benchmarks.sweep import run_sweep
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def test_table2_on_a_two_run_subset_writes_csv_md_and_figures(tmp_path):
+    rows = table2.main(
+        [
+            "--methods",
+            "rmpc:worst_case,smpc:exact",
+            "--uncertainty",
+            "low",
+            "--tolerances",
+            "0",
+            "--out",
+            str(tmp_path),
+            "--workers",
+            "1",
+        ]
+    )
+    assert len(rows) == 2
+    with (tmp_path / "table2.csv").open() as f:
+        reader = csv.DictReader(f)
+        assert tuple(reader.fieldnames) == table2.CSV_COLUMNS
+        written = list(reader)
+    assert [r["method"] for r in written] == ["RMPC", "SMPC"]
+    for r in written:
+        assert float(r["d_min"]) > 3.0 and r["collided"] == "False"
+        assert float(r["paper_e_acc"]) > 0 and math.isfinite(float(r["e_acc"]))
+    md = (tmp_path / "table2.md").read_text()
+    assert "The paper's claims" in md and "(53.5)" in md
+    for png in ("fig3_trajectories.png", "fig4_velocities.png"):
+        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    runs = np.load(tmp_path / "table2_runs.npz")
+    assert runs["RMPC/worst_case/low/eps=0/ego"].shape[1] == 4
+    # exact SMPC at epsilon = 0 equals the RMPC (P = 0 is the box)
+    assert rows[0]["d_min"] == pytest.approx(rows[1]["d_min"], abs=0.05)
+
+
+def test_claims_checker_flags_what_fails():
+    base = dict(method="RMPC", risk_method="worst_case", uncertainty="low", collided=False)
+    rows = [
+        {**base, "epsilon": 0.0, "e_acc": 50.0, "d_min": 9.0},
+        {**base, "epsilon": 500.0, "e_acc": 60.0, "d_min": 9.0},
+        {**base, "method": "SMPC", "risk_method": "exact", "epsilon": 0.0, "e_acc": 40.0, "d_min": 4.0},
+        {
+            **base,
+            "method": "SMPC",
+            "risk_method": "exact",
+            "epsilon": 500.0,
+            "e_acc": 41.0,
+            "d_min": 5.0,
+            "collided": True,
+        },
+    ]
+    verdicts = {claim: ok for claim, ok, _ in table2.check_claims(rows)}
+    assert verdicts["RMPC (worst_case) does not depend on epsilon"] is False
+    assert verdicts["SMPC (exact) d_min falls as epsilon grows"] is False
+    assert verdicts["No run collides"] is False
+    assert verdicts["SMPC (exact) below RMPC (worst_case) in e_acc and d_min"] is True
+
+
+def test_bad_cli_arguments_exit_with_a_message(capsys):
+    for argv in (
+        ["--methods", "mpc:exact"],
+        ["--uncertainty", "extreme"],
+        ["--tolerances", "a,b"],
+        ["--tolerances", "-1"],
+    ):
+        with pytest.raises(SystemExit):
+            table2.parse_args(argv)
+    assert "unknown" in capsys.readouterr().err
+
+
+def test_sampled_motion_study_on_two_episodes(tmp_path):
+    rows = sampled.main(
+        [
+            "--agents",
+            "smpc:exact",
+            "--severities",
+            "paper",
+            "--uncertainty",
+            "low",
+            "--tolerances",
+            "0",
+            "--episodes",
+            "2",
+            "--out",
+            str(tmp_path),
+            "--workers",
+            "1",
+        ]
+    )
+    assert len(rows) == 1 and rows[0]["episodes"] == 2
+    with (tmp_path / "sampled.csv").open() as f:
+        assert tuple(csv.DictReader(f).fieldnames) == sampled.COLUMNS
+    assert (
+        0.0 <= rows[0]["collision_ci_low"] <= rows[0]["collision_rate"] <= rows[0]["collision_ci_high"] <= 1.0
+    )
+
+
+def test_wilson_interval():
+    lo, hi = sampled.wilson(0, 200)
+    assert lo == 0.0 and 0.015 < hi < 0.02
+    lo, hi = sampled.wilson(100, 200)
+    assert lo == pytest.approx(0.431, abs=1e-3) and hi == pytest.approx(0.569, abs=1e-3)
+
+
+def test_process_pool_keeps_order():
+    assert run_sweep(_square, list(range(7)), workers=2) == [x * x for x in range(7)]
+
+
+def test_ray_sweep_matches_the_process_pool():
+    pytest.importorskip("ray")
+    specs = table2.specs_for(["rmpc:worst_case"], ["low"], [0.0, 2500.0], {"max_steps": 6})
+    local = run_sweep(table2.run_one, specs, workers=2)
+    remote = run_sweep(table2.run_one, specs, ray_address="")
+    for (row_a, arr_a), (row_b, arr_b) in zip(local, remote):
+        assert {k: v for k, v in row_a.items() if "ms" not in k and k != "wall_s"} == {
+            k: v for k, v in row_b.items() if "ms" not in k and k != "wall_s"
+        }
+        np.testing.assert_array_equal(arr_a["ego"], arr_b["ego"])
+
+
+@pytest.mark.slow
+def test_full_table2_reproduces_the_papers_trends(tmp_path):
+    rows = table2.main(["--methods", "rmpc:worst_case,smpc:exact", "--out", str(tmp_path), "--no-figures"])
+    verdicts = {claim: ok for claim, ok, _ in table2.check_claims(rows)}
+    assert verdicts["RMPC (worst_case) does not depend on epsilon"]
+    assert verdicts["RMPC (worst_case) d_min grows with uncertainty"]
