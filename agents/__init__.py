@@ -1,0 +1,17 @@
+"""Risk-constrained path-following MPC agents with SB3's predictor protocol."""
+
+from agents.base import FALLBACK_KINDS, Policy, SolveReport
+from agents.mpc import SOLVERS, STAGE_COSTS, PathFollowingMPC
+from agents.rmpc import RMPC
+from agents.smpc import SMPC
+
+__all__ = [
+    "FALLBACK_KINDS",
+    "RMPC",
+    "SMPC",
+    "SOLVERS",
+    "STAGE_COSTS",
+    "PathFollowingMPC",
+    "Policy",
+    "SolveReport",
+]

@@ -1,0 +1,103 @@
+"""The seam between controllers and the rest: the Policy protocol and the per-step solve report.
+
+Every agent (MPC or learned) offers stable-baselines3's predictor protocol,
+``action, state = agent.predict(obs, state=None, episode_start=None, deterministic=True)``, so
+SB3's ``evaluate_policy`` and the project's benchmarks drive them alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+FALLBACK_KINDS: tuple[str, ...] = ("shifted_plan", "brake")
+"""What an MPC applies when its solve fails: the next input of the previous plan, or braking."""
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """Anything with SB3's ``predict``: one observation ``(15,)`` -> action ``(2,)``, or a batch
+    ``(B, 15)`` -> ``(B, 2)``; ``state`` is the recurrent state (``None`` for MPC agents)."""
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]: ...
+
+
+@dataclass
+class SolveReport:
+    """What one MPC step did. Arrays use the prediction index n = 0..N (states) or n = 0..N-1
+    (inputs); ``risk[n - 1]`` belongs to the predicted state n."""
+
+    solve_time: float
+    """Wall time of the whole step [s]: observation, initial guess, solver call(s), fallback."""
+    success: bool
+    """The plan applied came from a converged solve (IPOPT's "Solved To Acceptable Level" counts)."""
+    status: str
+    """The solver's return status of the last call (e.g. ``"Solve_Succeeded"``)."""
+    iterations: int
+    """Solver iterations, summed over the calls of this step."""
+    fallback: str | None
+    """``None`` when the solve succeeded, else one of :data:`FALLBACK_KINDS`."""
+    action: np.ndarray
+    """The input applied ``(2,)``: v [m/s], omega [rad/s]."""
+    ego_trajectory: np.ndarray
+    """Predicted ego poses ``(N+1, 3)``: c1 [m], c2 [m], theta [rad] (unwrapped near the path)."""
+    inputs: np.ndarray
+    """Planned inputs ``(N, 2)``: v [m/s], omega [rad/s]."""
+    path_speed: np.ndarray
+    """Planned path speed u2 ``(N,)`` [m/s] of the timing law."""
+    lambdas: np.ndarray
+    """Planned path parameter ``(N+1,)`` [m], lambda_0 = the measured closest point."""
+    risk_tolerance: float
+    """epsilon used in this solve [units of the severity]."""
+    cost: float = float("nan")
+    """Objective value of the plan."""
+    retried: bool = False
+    """A first (warm-started) call failed and a cold start from the initial-guess candidates ran."""
+    variant: str = ""
+    """Which built NLP ran: ``"general"``, ``"zero"`` (epsilon = 0 form) or ``"free"`` (no risk
+    row could bind: the object's boxes are out of the ego's reach over the horizon)."""
+    solver_time: float = 0.0
+    """Wall time inside the solver call(s) [s]."""
+    timings: dict[str, float] = field(default_factory=dict)
+    """Solver-internal wall times [s] (``t_wall_*`` of nlpsol's stats) of the last call."""
+    risk_fn: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
+    """Computes :attr:`risk` on first access (a diagnostic: the step does not wait for it)."""
+    _risk: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def risk(self) -> np.ndarray:
+        """Predicted risk ``(N,)`` at the states n = 1..N with speed v_{n-1}, re-evaluated by the
+        numpy estimator that the constraint uses (Monte Carlo: the same draws, hard indicator).
+        Computed on first access, outside :attr:`solve_time`."""
+        if self._risk is None:
+            self._risk = np.asarray(self.risk_fn(), dtype=float).reshape(-1) if self.risk_fn else np.zeros(0)
+        return self._risk
+
+    @property
+    def failed(self) -> bool:
+        return self.fallback is not None
+
+    @property
+    def max_risk(self) -> float:
+        return float(np.max(self.risk)) if self.risk.size else 0.0
+
+
+def as_batch(observation: Any, size: int) -> tuple[np.ndarray, bool]:
+    """``(B, size)`` float64 observations and whether the input was a single ``(size,)`` one."""
+    obs = np.asarray(observation, dtype=float)
+    if obs.ndim == 1:
+        if obs.shape != (size,):
+            raise ValueError(f"observation must have shape ({size},) or (B, {size}), got {obs.shape}")
+        return obs[None, :], True
+    if obs.ndim != 2 or obs.shape[1] != size:
+        raise ValueError(f"observation must have shape ({size},) or (B, {size}), got {obs.shape}")
+    return obs, False

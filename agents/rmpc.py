@@ -1,0 +1,57 @@
+"""The robust MPC (paper Sec. IV): the worst-case risk constraint R_wc,n|k <= epsilon, n = 1..N."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from agents.mpc import PathFollowingMPC
+from risk_env.prediction import Belief
+from risk_env.risk import WorstCaseRisk
+from risk_env.scenario import Scenario
+
+
+class RMPC(PathFollowingMPC):
+    """Path-following MPC under the worst-case risk of every prediction step n = 1..N.
+
+    ``risk="worst_case"`` (default) uses the exact box form of
+    :class:`risk_env.risk.WorstCaseRisk`: ``max(clearance, (epsilon - s_worst)/scale) >= 0`` with
+    clearance = signed distance from the ego centre to the object's truncation box minus
+    ``r_e + r_o``; a tolerance above the worst severity over the speed interval relaxes it (with the
+    paper's severity and a speed interval containing 0 that takes epsilon >= 6250 J, so the paper's
+    RMPC ignores epsilon). ``risk="grid"`` is the paper's L-point grid under-approximation
+    (L = ``grid_points`` or the scenario's). Both are piecewise smooth (``fmax``); IPOPT copes.
+
+    See :class:`agents.mpc.PathFollowingMPC` for the problem, the solver options and the fallback
+    (shifted previous plan, then braking; counted in :attr:`failures`, never raised).
+
+    >>> from risk_env import Scenario
+    >>> agent = RMPC(Scenario.preset("low"))            # doctest: +SKIP
+    >>> action, _ = agent.predict(obs)                  # doctest: +SKIP
+    """
+
+    RISK_METHODS = ("worst_case", "grid")
+
+    def __init__(
+        self, scenario: Scenario, risk: str = "worst_case", grid_points: int | None = None, **kwargs: Any
+    ) -> None:
+        if risk not in self.RISK_METHODS:
+            raise ValueError(f"unknown RMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
+        self.risk_method = risk
+        self.estimator = WorstCaseRisk(scenario, grid=(risk == "grid"), grid_points=grid_points)
+        super().__init__(scenario, **kwargs)
+
+    def _estimator_key(self) -> tuple[Any, ...]:
+        return (self.risk_method, self.estimator.grid_points)
+
+    def _margin(self, ego: ca.SX, belief: Belief, epsilon: ca.SX, data: ca.SX, zero: bool) -> ca.SX:
+        return self.estimator.casadi_margin(ego, belief, epsilon)
+
+    def _risk_numpy(self, ego: np.ndarray, beliefs: Belief, data: np.ndarray) -> np.ndarray:
+        return self.estimator.risk(ego, beliefs)
+
+    def clearance(self, ego: np.ndarray, beliefs: Belief) -> np.ndarray:
+        """Distance [m] from ego centres ``(N, 4)`` to the truncation boxes minus r_e + r_o."""
+        return self.estimator.distance(ego, beliefs) - self.estimator.radius

@@ -1,0 +1,187 @@
+"""How fast and how reliable are the MPC agents? The paper's closed loop, solve by solve.
+
+``python -m benchmarks.timing [--steps 40] [--agents rmpc,smpc_exact,smpc_mc,rmpc_grid]
+[--uncertainty low,medium,high] [--tolerances 0,500,1000,1500,2000,2500] [--solver fatrop]``
+
+Each agent drives ``RiskCrossing-v0`` (ego and the deterministic object of the paper) for every
+uncertainty level and risk tolerance, up to ``--steps`` steps (an episode also ends at a collision
+or the goal). A step's time is the whole ``agent.predict`` call as :class:`agents.SolveReport`
+measures it (initial guess, solver, fallback, the plan's risk re-evaluation). Printed per agent:
+solve time per step median / p95 / max [ms], failed solves (fallbacks), solver iterations
+(median), the real-time margin against the sample time T (``T / p95``, and the share of T left by
+the slowest step), the time to build the solvers, and per configuration e_acc, d_min and the
+steps taken. Targets on the project's 2-core machine (median / p95): RMPC and exact SMPC 5 / 15 ms,
+Monte Carlo SMPC (J = 500) 40 / 80 ms, no failed solve.
+
+``--jit`` compiles the NLPs (CasADi's shell compiler, ``-O1``): one to two minutes per uncertainty
+level for the exact SMPC, several for Monte Carlo, paid once per machine (compiled solvers are kept
+in ``$RISKMPC_JIT_CACHE``, default ``~/.cache/riskcrossing/jit``); the "build" time printed is what
+this run spent building and compiling. Timings on a shared machine are noisy: run it alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+from tqdm import tqdm
+
+import risk_env  # noqa: F401  (registers RiskCrossing-v0)
+from agents import RMPC, SMPC, PathFollowingMPC
+from risk_env import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
+
+AGENTS: dict[str, tuple[str, Callable[..., PathFollowingMPC]]] = {
+    "rmpc": ("RMPC, worst case (box)", lambda sc, **kw: RMPC(sc, **kw)),
+    "rmpc_grid": ("RMPC, L-point grid", lambda sc, **kw: RMPC(sc, risk="grid", **kw)),
+    "smpc_exact": ("SMPC, exact risk", lambda sc, **kw: SMPC(sc, **kw)),
+    "smpc_mc": (
+        "SMPC, Monte Carlo",
+        lambda sc, samples=None, **kw: SMPC(sc, risk="monte_carlo", samples=samples, **kw),
+    ),
+}
+TARGETS_MS = {"rmpc": (5.0, 15.0), "smpc_exact": (5.0, 15.0), "smpc_mc": (40.0, 80.0)}
+"""(median, p95) solve-time targets per step [ms]."""
+
+
+@dataclass
+class Episode:
+    """One closed loop: per-step solve data and the episode's metrics."""
+
+    uncertainty: str
+    epsilon: float
+    times: list[float] = field(default_factory=list)
+    iterations: list[int] = field(default_factory=list)
+    failures: int = 0
+    free_steps: int = 0
+    e_acc: float = 0.0
+    d_min: float = float("inf")
+    collision: bool = False
+    steps: int = 0
+
+
+def run_episode(agent: PathFollowingMPC, env: gym.Env, steps: int, progress: tqdm) -> Episode:
+    """Drive ``env`` with ``agent`` for up to ``steps`` steps."""
+    scenario = env.unwrapped.scenario
+    record = Episode(uncertainty="", epsilon=scenario.risk_tolerance)
+    obs, info = env.reset(seed=0)
+    agent.reset()
+    record.e_acc = float(np.linalg.norm(info["path_error"]))
+    record.d_min = float(info["distance"])
+    start = True
+    for _ in range(steps):
+        action, _ = agent.predict(obs, episode_start=start)
+        start = False
+        report = agent.last_solve
+        record.times.append(report.solve_time)
+        record.iterations.append(report.iterations)
+        record.failures += report.fallback is not None
+        record.free_steps += report.variant == "free"
+        obs, _, terminated, truncated, info = env.step(action)
+        record.e_acc += float(np.linalg.norm(info["path_error"]))
+        record.d_min = min(record.d_min, float(info["distance"]))
+        record.collision |= bool(info["collision"])
+        record.steps += 1
+        progress.update(1)
+        if terminated or truncated:
+            break
+    return record
+
+
+def summarise(name: str, episodes: list[Episode], build_time: float, dt: float) -> list[str]:
+    """The agent's lines of the report."""
+    t = 1e3 * np.concatenate([e.times for e in episodes])
+    its = np.concatenate([e.iterations for e in episodes])
+    med, p95, worst = np.median(t), np.percentile(t, 95), t.max()
+    failures = sum(e.failures for e in episodes)
+    target = TARGETS_MS.get(name)
+    verdict = ""
+    if target is not None:
+        ok = med <= target[0] and p95 <= target[1] and failures == 0
+        verdict = f"  target {target[0]:g} / {target[1]:g} ms, no failure: {'met' if ok else 'NOT met'}"
+    lines = [
+        f"{AGENTS[name][0]} [{name}]: {len(episodes)} episodes, {len(t)} solves, build {build_time:.2f} s",
+        f"  solve time per step [ms]: median {med:.2f}  p95 {p95:.2f}  max {worst:.2f}{verdict}",
+        f"  failed solves {failures}  iterations median {np.median(its):g} (max {its.max()})"
+        f"  steps without a reachable box ('free') {sum(e.free_steps for e in episodes)}",
+        f"  real time vs T = {1e3 * dt:g} ms: T/p95 = {1e3 * dt / p95:.0f}x,"
+        f" slowest step leaves {100 * (1 - worst / (1e3 * dt)):.1f}% of T",
+        "  uncertainty  eps [J]  steps  e_acc  d_min  collision  failures  median [ms]",
+    ]
+    for e in episodes:
+        lines.append(
+            f"  {e.uncertainty:>11}  {e.epsilon:7g}  {e.steps:5d}  {e.e_acc:5.1f}  {e.d_min:5.2f}"
+            f"  {'yes' if e.collision else 'no':>9}  {e.failures:8d}  {1e3 * np.median(e.times):11.2f}"
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.timing",
+        description="Solve time and reliability of the MPC agents in the paper's closed loop.",
+    )
+    parser.add_argument("--steps", type=int, default=40, help="steps per episode (default 40)")
+    parser.add_argument(
+        "--agents",
+        default="rmpc,smpc_exact,smpc_mc,rmpc_grid",
+        help=f"comma-separated, from {', '.join(AGENTS)} (default: all)",
+    )
+    parser.add_argument("--uncertainty", default="low,medium,high", help="comma-separated Table I presets")
+    parser.add_argument(
+        "--tolerances",
+        default=",".join(f"{e:g}" for e in RISK_TOLERANCES),
+        help="comma-separated risk tolerances epsilon [J] (default: the paper's 0..2500)",
+    )
+    parser.add_argument("--solver", default="fatrop", choices=("fatrop", "ipopt"), help="NLP solver")
+    parser.add_argument(
+        "--samples", type=int, default=None, help="Monte Carlo draws J (default: scenario's 500)"
+    )
+    parser.add_argument("--jit", action="store_true", help="jit-compile the NLPs (slow to build)")
+    parser.add_argument("--max-iter", type=int, default=None, help="solver iteration limit per call")
+    parser.add_argument("--cold-starts", type=int, default=None, help="cold starts after a failed warm one")
+    args = parser.parse_args(argv)
+
+    names = [a.strip() for a in args.agents.split(",") if a.strip()]
+    unknown = [a for a in names if a not in AGENTS]
+    if unknown:
+        parser.error(f"unknown agent(s) {unknown}; choose from {list(AGENTS)}")
+    levels = [u.strip() for u in args.uncertainty.split(",") if u.strip()]
+    if any(u not in UNCERTAINTY_PRESETS for u in levels):
+        parser.error(f"uncertainty must be among {UNCERTAINTY_PRESETS}, got {levels}")
+    tolerances = [float(e) for e in args.tolerances.split(",") if e.strip()]
+    if args.steps < 1:
+        parser.error(f"--steps must be >= 1, got {args.steps}")
+
+    options = {"solver": args.solver, "jit": args.jit}
+    if args.max_iter is not None:
+        options["max_iter"] = args.max_iter
+    if args.cold_starts is not None:
+        options["cold_starts"] = args.cold_starts
+    total = len(names) * len(levels) * len(tolerances) * args.steps
+    report: list[str] = []
+    with tqdm(total=total, desc="closed loops", unit="step") as progress:
+        for name in names:
+            make = AGENTS[name][1]
+            kwargs = dict(options, samples=args.samples) if name == "smpc_mc" else dict(options)
+            episodes, build_time = [], 0.0
+            for level in levels:
+                for epsilon in tolerances:
+                    progress.set_postfix_str(f"{name} {level} eps={epsilon:g}")
+                    env = gym.make("RiskCrossing-v0", uncertainty=level, risk_tolerance=epsilon)
+                    t0 = time.perf_counter()
+                    agent = make(env.unwrapped.scenario, **kwargs)
+                    build_time += time.perf_counter() - t0
+                    episode = run_episode(agent, env, args.steps, progress)
+                    episode.uncertainty = level
+                    episodes.append(episode)
+                    progress.update(args.steps - episode.steps)  # an early end still counts its budget
+            report += summarise(name, episodes, build_time, Scenario().dt) + [""]
+    print("\n".join(report).rstrip())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,306 @@
+"""The MPC agents: one solve, the RMPC's boxes, SMPC(epsilon = 0) = RMPC, closed loops in the env,
+the fallback, the predictor protocol and argument checks.
+
+Closed loops run in ``gym.make("RiskCrossing-v0")``; plans are checked against the env's own numpy
+estimators (:func:`risk_env.make_estimator`) on :func:`risk_env.predict_array` beliefs.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import risk_env  # noqa: F401  (registers RiskCrossing-v0)
+from agents import RMPC, SMPC, Policy, SolveReport
+from risk_env import Scenario, make_estimator, predict_array
+from risk_env import observation as ob
+from risk_env.risk import signed_box_distance
+
+RISK_TOLERANCE_J = 1.0
+"""Slack [J] on the exact risk of a converged plan (solver tolerance 1e-6 on risk/1000 J, plus
+the back-off that keeps it 0.1 J inside)."""
+
+
+def start_observation(scenario: Scenario) -> np.ndarray:
+    env = gym.make("RiskCrossing-v0", scenario=scenario)
+    obs, _ = env.reset(seed=0)
+    return obs
+
+
+def check_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) -> None:
+    ego, dt = scenario.ego, scenario.dt
+    assert action.dtype == np.float32 and action.shape == (2,)
+    assert np.all(np.isfinite(action))
+    v, w = (float(a) for a in action)
+    assert ego.v_min - 1e-6 <= v <= ego.v_max + 1e-6
+    assert abs(w) <= ego.omega_max + 1e-6
+    assert abs(v - last[0]) <= ego.accel_max * dt + 1e-5
+    assert abs(w - last[1]) <= ego.omega_rate_max * dt + 1e-5
+
+
+def plan_risk(agent, scenario: Scenario, obs: np.ndarray, estimator: str) -> np.ndarray:
+    """The plan's risk at n = 1..N by the env's estimator, against predict_array's beliefs."""
+    report = agent.last_solve
+    beliefs = predict_array(scenario, ob.split(obs).object_measurement)[1:]
+    ego = np.column_stack([report.ego_trajectory[1:], report.inputs[:, 0]])
+    return make_estimator(estimator, scenario).risk(ego, beliefs)
+
+
+def closed_loop(agent, env: gym.Env, steps: int) -> dict[str, np.ndarray]:
+    """Run ``agent`` in ``env`` for up to ``steps`` steps; arrays over the steps taken."""
+    obs, info = env.reset(seed=0)
+    agent.reset()
+    record: dict[str, list] = {
+        "ego": [info["ego"]],
+        "distance": [info["distance"]],
+        "risk": [],
+        "action": [],
+        "plan_risk": [],
+    }
+    start = True
+    for _ in range(steps):
+        action, _ = agent.predict(obs, episode_start=np.array([start]))
+        start = False
+        check_action(env.unwrapped.scenario, action, ob.split(obs).ego_input)
+        obs, _, terminated, truncated, info = env.step(action)
+        record["ego"].append(info["ego"])
+        record["distance"].append(info["distance"])
+        record["risk"].append(info["risk"])
+        record["action"].append(action)
+        record["plan_risk"].append(agent.last_solve.risk)
+        if terminated or truncated:
+            break
+    return {k: np.array(v) for k, v in record.items()}
+
+
+# ----------------------------------------------------------------------------- one solve
+@pytest.mark.parametrize(
+    ("make", "estimator", "epsilon"),
+    [
+        (lambda sc: RMPC(sc), "worst_case", 0.0),
+        (lambda sc: SMPC(sc), "exact", 0.0),
+        (lambda sc: SMPC(sc), "exact", 500.0),
+        (lambda sc: SMPC(sc, solver="ipopt"), "exact", 1000.0),
+        (lambda sc: RMPC(sc, stage_cost="paper", solver="ipopt"), "worst_case", 0.0),
+    ],
+    ids=["rmpc", "smpc-exact-0", "smpc-exact-500", "smpc-exact-1000-ipopt", "rmpc-paper-cost-ipopt"],
+)
+def test_one_solve_from_the_paper_start(make, estimator: str, epsilon: float) -> None:
+    scenario = Scenario.preset("medium", risk_tolerance=epsilon)
+    agent = make(scenario)
+    obs = start_observation(scenario)
+    action, state = agent.predict(obs)
+    report = agent.last_solve
+    assert state is None
+    assert report.success and report.fallback is None and agent.failures == 0
+    check_action(scenario, action, np.zeros(2))
+    np.testing.assert_allclose(report.action, action)
+    np.testing.assert_allclose(report.inputs[0], action, atol=1e-5)
+    N = scenario.horizon
+    assert report.ego_trajectory.shape == (N + 1, 3) and report.inputs.shape == (N, 2)
+    assert report.risk.shape == (N,) and report.lambdas.shape == (N + 1,)
+    assert report.lambdas[0] == pytest.approx(float(obs[ob.PROGRESS]))
+    risk = plan_risk(agent, scenario, obs, estimator)
+    assert np.all(risk <= epsilon + RISK_TOLERANCE_J), risk
+    np.testing.assert_allclose(report.risk, risk, rtol=1e-9, atol=1e-9)  # same estimator, same plan
+
+
+def test_monte_carlo_plan_respects_its_own_draws() -> None:
+    """The plan's Monte Carlo risk on the solve's draws (hard indicator) stays within epsilon, up to
+    the smoothed indicator's width: a draw within a few ``smoothing`` of the disc edge may count."""
+    scenario = Scenario.preset("medium", risk_tolerance=1000.0)
+    agent = SMPC(scenario, risk="monte_carlo", samples=200, seed=3)
+    obs = start_observation(scenario)
+    agent.predict(obs)
+    report = agent.last_solve
+    assert report.success
+    per_draw = 0.5 * 1000.0 * 5.0**2 / 200  # one draw's largest contribution at |v| <= 5 m/s [J]
+    assert np.all(report.risk <= 1000.0 + 2 * per_draw), report.risk
+
+
+# ----------------------------------------------------------------------------- RMPC boxes
+def test_rmpc_plan_keeps_the_ego_disc_off_every_truncation_box() -> None:
+    scenario = Scenario.preset("high")
+    env = gym.make("RiskCrossing-v0", scenario=scenario, risk_estimator="worst_case")
+    agent = RMPC.from_env(env)
+    obs, _ = env.reset(seed=0)
+    r = scenario.collision_distance
+    for _ in range(6):
+        action, _ = agent.predict(obs)
+        report = agent.last_solve
+        assert report.success
+        beliefs = predict_array(scenario, ob.split(obs).object_measurement)[1:]
+        xy = report.ego_trajectory[1:, :2]
+        d = signed_box_distance(xy[:, 0] - beliefs.x, xy[:, 1] - beliefs.y, beliefs.half_x, beliefs.half_y)
+        assert np.all(d >= r - 1e-3), d
+        assert np.all(report.risk == 0.0)
+        obs, _, terminated, _, info = env.step(action)
+        assert info["risk"] == 0.0
+        assert not terminated
+
+
+# ----------------------------------------------------------------------------- closed loops
+def test_exact_smpc_at_zero_tolerance_drives_like_the_rmpc() -> None:
+    """SPEC: P = 0 means outside the box, so SMPC(exact, epsilon = 0) is the RMPC."""
+    env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=0.0)
+    smpc = closed_loop(SMPC.from_env(env), env, 15)
+    rmpc = closed_loop(RMPC.from_env(env), env, 15)
+    assert len(smpc["ego"]) == len(rmpc["ego"]) == 16
+    np.testing.assert_allclose(smpc["ego"], rmpc["ego"], atol=1e-3)
+    # ... and it differs from an SMPC that tolerates risk
+    loose = closed_loop(SMPC.from_env(env, risk_tolerance=1000.0), env, 15)
+    assert np.max(np.abs(loose["ego"] - rmpc["ego"])) > 0.5
+
+
+@pytest.mark.parametrize("make", [RMPC.from_env, SMPC.from_env], ids=["rmpc", "smpc-exact"])
+def test_short_closed_loop_low_uncertainty_no_collision(make) -> None:
+    env = gym.make("RiskCrossing-v0", uncertainty="low", risk_tolerance=0.0)
+    agent = make(env)
+    run = closed_loop(agent, env, 30)  # the object has passed the path by then
+    assert len(run["action"]) == 30
+    assert agent.failures == 0
+    assert run["distance"].min() > env.unwrapped.scenario.collision_distance
+    assert np.all(run["risk"] == 0.0)  # the env's exact risk at epsilon = 0
+    assert run["ego"][-1, 0] > 0.0  # on its way to the goal
+
+
+def test_smpc_keeps_the_envs_risk_within_tolerance() -> None:
+    """With the deterministic object, the env's R_{k+1|k} is the plan's first-step risk."""
+    epsilon = 500.0
+    env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=epsilon)
+    agent = SMPC.from_env(env)
+    run = closed_loop(agent, env, 20)
+    assert agent.failures == 0
+    assert np.all(run["risk"] <= epsilon + RISK_TOLERANCE_J), run["risk"]
+    assert np.all(run["plan_risk"] <= epsilon + RISK_TOLERANCE_J)
+    assert run["plan_risk"].max() > 0.5 * epsilon  # the tolerance is used by the plans
+
+
+# ----------------------------------------------------------------------------- fallback
+def test_fallback_brakes_when_the_ego_starts_inside_the_box() -> None:
+    scenario = Scenario.preset("low")
+    agent = RMPC(scenario)
+    obs = start_observation(scenario).copy()
+    obs[ob.EGO_POSE] = (5.0, -3.5, np.pi / 2)  # on top of the object, moving with it
+    obs[ob.EGO_INPUT] = (2.0, 0.1)
+    for count in (1, 2):
+        action, _ = agent.predict(obs)
+        report = agent.last_solve
+        assert not report.success and report.fallback == "brake"
+        assert agent.failures == count
+        check_action(scenario, action, obs[ob.EGO_INPUT])
+        assert action[0] == pytest.approx(2.0 - scenario.ego.accel_max * scenario.dt, abs=1e-5)
+        assert action[1] == pytest.approx(0.0, abs=1e-6)
+        assert np.all(np.isfinite(report.ego_trajectory)) and np.all(np.isfinite(report.risk))
+    agent.reset()
+    assert agent.failures == 0 and agent.last_solve is None
+
+
+def test_fallback_with_too_few_iterations() -> None:
+    scenario = Scenario.preset("medium", risk_tolerance=500.0)
+    agent = SMPC(scenario, max_iter=1)
+    action, _ = agent.predict(start_observation(scenario))
+    assert agent.last_solve.fallback == "brake" and agent.failures == 1
+    check_action(scenario, action, np.zeros(2))
+
+
+def test_fallback_follows_the_shifted_previous_plan(monkeypatch) -> None:
+    env = gym.make("RiskCrossing-v0", uncertainty="low")
+    agent = RMPC.from_env(env)
+    obs, _ = env.reset(seed=0)
+    action, _ = agent.predict(obs)
+    plan = agent.last_solve.inputs.copy()
+    obs, *_ = env.step(action)
+    monkeypatch.setattr(agent, "_call", lambda pr, args: ({}, "forced failure", False, 0, {}))
+    for n in (1, 2):
+        action, _ = agent.predict(obs)
+        assert agent.last_solve.fallback == "shifted_plan" and agent.last_solve.status == "forced failure"
+        assert agent.failures == n
+        np.testing.assert_allclose(action, plan[n], atol=1e-5)
+        obs, *_ = env.step(action)
+
+
+# ----------------------------------------------------------------------------- API
+def test_predictor_protocol_batches_and_episode_start() -> None:
+    env = gym.make("RiskCrossing-v0", uncertainty="low")
+    agent = RMPC.from_env(env, risk_tolerance=100.0)
+    assert isinstance(agent, Policy)
+    assert agent.risk_tolerance == 100.0 and env.unwrapped.scenario.risk_tolerance == 0.0
+    obs, _ = env.reset(seed=0)
+    single, _ = agent.predict(obs, episode_start=True)
+    batch = np.stack([obs, obs, obs])
+    actions, state = agent.predict(batch, episode_start=np.ones(3, dtype=bool))
+    assert state is None and actions.shape == (3, 2) and actions.dtype == np.float32
+    np.testing.assert_allclose(actions, np.broadcast_to(single, (3, 2)), atol=1e-5)
+    assert len(agent.last_solves) == 3 and isinstance(agent.last_solve, SolveReport)
+    # a second step warm-starts; an episode start cold-starts and gives the first action again
+    obs2, *_ = env.step(single)
+    agent.predict(obs2)
+    again, _ = agent.predict(obs, episode_start=np.array([True]))
+    np.testing.assert_allclose(again, single, atol=1e-4)
+    with pytest.raises(ValueError, match="shape"):
+        agent.predict(np.zeros(14))
+
+
+def test_monte_carlo_draws_are_reproducible() -> None:
+    scenario = Scenario.preset("medium", risk_tolerance=1000.0)
+    obs = start_observation(scenario)
+    a = SMPC(scenario, risk="monte_carlo", samples=50, seed=7)
+    b = SMPC(scenario, risk="monte_carlo", samples=50, seed=7)
+    first = a.predict(obs)[0], a.last_solve.risk.copy()
+    second = b.predict(obs)[0], b.last_solve.risk.copy()
+    np.testing.assert_array_equal(first[0], second[0])
+    np.testing.assert_array_equal(first[1], second[1])
+    a.reset()
+    np.testing.assert_array_equal(a.predict(obs)[0], first[0])
+    assert a.samples == 50
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda sc: RMPC(sc, risk_tolerance=-1.0), "-1.0"),
+        (lambda sc: SMPC(sc, risk_tolerance=float("nan")), "nan"),
+        (lambda sc: RMPC(sc, risk="exact"), "'exact'"),
+        (lambda sc: SMPC(sc, risk="worst_case"), "'worst_case'"),
+        (lambda sc: SMPC(sc, risk="monte_carlo", samples=0), "samples.*0"),
+        (lambda sc: SMPC(sc, risk="monte_carlo", samples=-3), "samples.*-3"),
+        (lambda sc: RMPC(sc, solver="snopt"), "'snopt'"),
+        (lambda sc: SMPC(sc, stage_cost="terminal"), "'terminal'"),
+        (lambda sc: RMPC(sc, max_iter=0), "max_iter"),
+        (lambda sc: RMPC(sc, cold_starts=0), "cold_starts"),
+    ],
+)
+def test_bad_arguments_raise(make, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        make(Scenario.preset("low"))
+
+
+def test_from_env_needs_a_scenario() -> None:
+    with pytest.raises(TypeError, match="scenario"):
+        RMPC.from_env(object())
+
+
+def test_free_variant_when_no_box_is_reachable(monkeypatch) -> None:
+    """Far from the object no risk row can bind: the risk-free NLP runs and gives the same plan."""
+    scenario = Scenario.preset("low", object_start=(60.0, -80.0, np.pi / 2), risk_tolerance=500.0)
+    obs = start_observation(scenario)
+    free = SMPC(scenario)
+    action, _ = free.predict(obs)
+    assert free.last_solve.variant == "free" and free.last_solve.success
+    forced = SMPC(scenario)
+    monkeypatch.setattr(forced, "_risk_possible", lambda x0, future: True)
+    forced_action, _ = forced.predict(obs)
+    assert forced.last_solve.variant == "general" and forced.last_solve.success
+    np.testing.assert_allclose(action, forced_action, atol=1e-3)
+    np.testing.assert_allclose(free.last_solve.ego_trajectory, forced.last_solve.ego_trajectory, atol=1e-2)
+
+
+def test_jit_falls_back_without_a_compiler(monkeypatch) -> None:
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    with pytest.warns(UserWarning, match="no C compiler"):
+        agent = RMPC(Scenario.preset("low", horizon=3), jit=True, jit_cache=None)
+    assert not agent.compiled
+    agent.predict(start_observation(agent.scenario))
+    assert agent.last_solve.success
