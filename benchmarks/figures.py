@@ -59,7 +59,7 @@ def paper_figures(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out
                     ego[:, 1],
                     color=c,
                     lw=1.8,
-                    label=f"{r['uncertainty']} (d_min {r['d_min']:.1f} m)",
+                    label=f"{r['uncertainty']} (d_min {r['d_min']:.1f} m{', COLLIDED' * r['collided']})",
                 )
                 ax.plot(ego[::MARKER_STEPS, 0], ego[::MARKER_STEPS, 1], "o", color=c, ms=3)
                 ax.plot(obj[:, 0], obj[:, 1], color="0.5", lw=1)
