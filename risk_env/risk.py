@@ -207,7 +207,8 @@ class MonteCarloRisk(RiskEstimator):
         dx = x - samples[:, 0]
         dy = y - samples[:, 1]
         dist = ca.sqrt(dx * dx + dy * dy + 1e-9)
-        hit = 1.0 / (1.0 + ca.exp((dist - self.radius) / self.smoothing))
+        # logistic written with tanh: no overflow (and no NaN gradient) for far draws
+        hit = 0.5 * (1.0 - ca.tanh(0.5 * (dist - self.radius) / self.smoothing))
         s = self.severity.value(v, th, samples[:, 2], belief.theta, ops)
         return ca.sum1(hit * s) / samples.shape[0]
 
