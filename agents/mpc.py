@@ -347,7 +347,7 @@ class PathFollowingMPC:
                 type(self).__name__,
                 variant,
                 self.scenario.replace(risk_tolerance=0.0),
-                self._estimator_key() if variant != "free" else (),
+                self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.solver_name,
                 self.stage_cost,
                 self.jit,

@@ -304,3 +304,17 @@ def test_jit_falls_back_without_a_compiler(monkeypatch) -> None:
     assert not agent.compiled
     agent.predict(start_observation(agent.scenario))
     assert agent.last_solve.success
+
+
+def test_agents_with_different_estimators_share_a_process():
+    """Solver caching must not hand one estimator's problem (and parameter layout) to another."""
+    import gymnasium as gym
+
+    from agents import SMPC
+    from benchmarks.rollout import rollout
+
+    env = gym.make("RiskCrossing-v0", uncertainty="low", risk_tolerance=0.0, max_steps=40)
+    for risk in ("exact", "monte_carlo"):
+        agent = SMPC.from_env(env, risk=risk)
+        record = rollout(agent, env, seed=0)
+        assert record.steps >= 30 and np.all(np.isfinite(record.actions))
