@@ -222,3 +222,21 @@ def test_bad_arguments():
         make_estimator("monte_carlo", s, samples=0)
     with pytest.raises(ValueError, match="last axis of 4"):
         make_estimator("exact", s).risk(np.zeros(3), predict_array(s, MEASUREMENT)[1])
+
+
+def test_exact_risk_skips_only_states_whose_disc_misses_the_box():
+    from risk_env.ops import NUMPY
+
+    s = Scenario.preset("high")
+    est = make_estimator("exact", s)
+    beliefs = predict_array(s, MEASUREMENT)
+    rng = np.random.default_rng(3)
+    egos = np.column_stack(
+        [rng.normal(5, 10, 600), rng.normal(0, 10, 600), rng.uniform(-3, 3, 600), rng.uniform(-4, 8, 600)]
+    )
+    full = np.asarray(est._risk(egos, beliefs[3], NUMPY))
+    assert 0.2 < np.mean(full > 0) < 0.9  # a mixed batch: near and far states
+    np.testing.assert_array_equal(est.risk(egos, beliefs[3]), full)
+    steps = np.broadcast_to(egos[0], (s.horizon + 1, 4))  # one ego state against every step's belief
+    np.testing.assert_array_equal(est.risk(steps, beliefs), np.asarray(est._risk(steps, beliefs, NUMPY)))
+    assert float(est.risk(np.array([60.0, 60.0, 0.0, 4.0]), beliefs[1])) == 0.0
