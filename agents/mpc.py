@@ -21,7 +21,7 @@ The optimal control problem, in the order of the sections of :meth:`PathFollowin
   ``|v_n - v_{n-1}| <= accel_max T``, ``|omega_n - omega_{n-1}| <= omega_rate_max T`` with
   (v, omega)_{-1} the last applied input; ``u2 in [v_min, v_max]`` (the paper's u2 in V_e, the
   ego's own speed set, so the reference point may wait or step back with a reversing ego);
-  ``lambda_n >= min(lambda_0, lambda_k)`` and no upper cap (the path continues beyond the goal);
+  ``lambda_n >= lambda_0`` (the path's start) and no upper cap (the path continues beyond the goal);
   the subclass's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
@@ -302,7 +302,11 @@ class PathFollowingMPC:
         starts = np.zeros(len(obs), dtype=bool)
         if episode_start is not None:
             flags = np.asarray(episode_start, dtype=bool).reshape(-1)
-            starts |= flags if flags.size == len(obs) else np.broadcast_to(flags[:1], (len(obs),))
+            if flags.size not in (1, len(obs)):
+                raise ValueError(
+                    f"episode_start must have 1 or {len(obs)} entries (one per observation), got {flags.size}"
+                )
+            starts |= np.broadcast_to(flags, (len(obs),))
         actions = np.empty((len(obs), 2), dtype=np.float32)
         reports = []
         for i, o in enumerate(obs):

@@ -318,3 +318,12 @@ def test_agents_with_different_estimators_share_a_process():
         agent = SMPC.from_env(env, risk=risk)
         record = rollout(agent, env, seed=0)
         assert record.steps >= 30 and np.all(np.isfinite(record.actions))
+
+
+def test_episode_start_of_the_wrong_size_raises():
+    from agents import RMPC
+
+    agent = RMPC(Scenario.preset("low"))
+    obs = np.zeros((2, 15), dtype=np.float32)
+    with pytest.raises(ValueError, match="episode_start must have 1 or 2 entries"):
+        agent.predict(obs, episode_start=np.array([True, False, True]))
