@@ -33,6 +33,8 @@ class EpisodeRecord:
     collision: bool
     success: bool
     epsilon: float
+    reports: list[Any] = field(default_factory=list)
+    """(steps,) the agent's ``last_solve`` after each step (None for agents without one)."""
     info: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -66,7 +68,7 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         agent.reset()
     ego, obj = [info["ego"]], [info["object"]]
     errors, dist = [info["path_error"]], [info["distance"]]
-    actions, risks, times, fallbacks = [], [], [], []
+    actions, risks, times, fallbacks, reports = [], [], [], [], []
     state, start = None, True
     terminated = truncated = False
     while not (terminated or truncated):
@@ -75,6 +77,7 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         elapsed = time.perf_counter() - t0
         start = False
         report = getattr(agent, "last_solve", None)
+        reports.append(report)
         times.append(getattr(report, "solve_time", elapsed) if report is not None else elapsed)
         fallbacks.append(bool(getattr(report, "fallback", False)) if report is not None else False)
         obs, _, terminated, truncated, info = env.step(action)
@@ -96,4 +99,5 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         collision=bool(info.get("collision", False)),
         success=bool(info.get("is_success", False)),
         epsilon=float(env.unwrapped.scenario.risk_tolerance),
+        reports=reports,
     )

@@ -32,6 +32,7 @@ from tqdm import tqdm
 
 import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents import RMPC, SMPC, PathFollowingMPC
+from benchmarks.rollout import rollout
 from risk_env import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
 
 AGENTS: dict[str, tuple[str, Callable[..., PathFollowingMPC]]] = {
@@ -63,32 +64,21 @@ class Episode:
     steps: int = 0
 
 
-def run_episode(agent: PathFollowingMPC, env: gym.Env, steps: int, progress: tqdm) -> Episode:
-    """Drive ``env`` with ``agent`` for up to ``steps`` steps."""
-    scenario = env.unwrapped.scenario
-    record = Episode(uncertainty="", epsilon=scenario.risk_tolerance)
-    obs, info = env.reset(seed=0)
-    agent.reset()
-    record.e_acc = float(np.linalg.norm(info["path_error"]))
-    record.d_min = float(info["distance"])
-    start = True
-    for _ in range(steps):
-        action, _ = agent.predict(obs, episode_start=start)
-        start = False
-        report = agent.last_solve
-        record.times.append(report.solve_time)
-        record.iterations.append(report.iterations)
-        record.failures += report.fallback is not None
-        record.free_steps += report.variant == "free"
-        obs, _, terminated, truncated, info = env.step(action)
-        record.e_acc += float(np.linalg.norm(info["path_error"]))
-        record.d_min = min(record.d_min, float(info["distance"]))
-        record.collision |= bool(info["collision"])
-        record.steps += 1
-        progress.update(1)
-        if terminated or truncated:
-            break
-    return record
+def run_episode(agent: PathFollowingMPC, env: gym.Env) -> Episode:
+    """Drive ``env`` with ``agent`` for one episode (the shared rollout loop) and keep the solve data."""
+    record = rollout(agent, env, seed=0)
+    return Episode(
+        uncertainty="",
+        epsilon=record.epsilon,
+        times=list(record.solve_time),
+        iterations=[r.iterations for r in record.reports],
+        failures=record.failures,
+        free_steps=sum(r.variant == "free" for r in record.reports),
+        e_acc=record.e_acc,
+        d_min=record.d_min,
+        collision=record.collision,
+        steps=record.steps,
+    )
 
 
 def summarise(name: str, episodes: list[Episode], build_time: float, dt: float) -> list[str]:
@@ -171,14 +161,16 @@ def main(argv: list[str] | None = None) -> None:
             for level in levels:
                 for epsilon in tolerances:
                     progress.set_postfix_str(f"{name} {level} eps={epsilon:g}")
-                    env = gym.make("RiskCrossing-v0", uncertainty=level, risk_tolerance=epsilon)
+                    env = gym.make(
+                        "RiskCrossing-v0", uncertainty=level, risk_tolerance=epsilon, max_steps=args.steps
+                    )
                     t0 = time.perf_counter()
                     agent = make(env.unwrapped.scenario, **kwargs)
                     build_time += time.perf_counter() - t0
-                    episode = run_episode(agent, env, args.steps, progress)
+                    episode = run_episode(agent, env)
                     episode.uncertainty = level
                     episodes.append(episode)
-                    progress.update(args.steps - episode.steps)  # an early end still counts its budget
+                    progress.update(args.steps)  # an early end still counts its budget
             report += summarise(name, episodes, build_time, Scenario().dt) + [""]
     print("\n".join(report).rstrip())
 
