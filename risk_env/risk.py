@@ -56,7 +56,9 @@ def _ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
     return ego[0], ego[1], ego[2], ego[3]
 
 
-def disc_probability(dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops = NUMPY) -> Any:
+def disc_probability(
+    dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops = NUMPY, gate: bool = True
+) -> Any:
     """P(||d - z|| <= radius) for z ~ truncated N(0, diag(sigma_x^2, sigma_y^2)) on the box
     ``[-half_x, half_x] x [-half_y, half_y]``; ``(dx, dy)`` = ego centre minus object mean [m].
 
@@ -108,6 +110,8 @@ def disc_probability(dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops =
     x_lo, x_hi = dx + r * s_lo, dx + r * s_hi
     mass = ops.norm_cdf(x_hi / sx) - ops.norm_cdf(x_lo / sx)
     p = ops.clip((mass * zy - missed) / (zx * zy), 0.0, 1.0)
+    if not gate:  # the caller passes only states whose disc meets the box
+        return p
     # Exactly 0 when the disc misses the box (the complementary form leaves ~1e-7 there).
     return ops.where(signed_box_distance(dx, dy, hx, hy, ops) < r, p, 0.0 * p)
 
@@ -162,9 +166,9 @@ class ExactRisk(RiskEstimator):
 
     name = "exact"
 
-    def _risk(self, ego, belief, ops, **kwargs):
+    def _risk(self, ego, belief, ops, gate=True, **kwargs):
         x, y, th, v = _ego_parts(ego)
-        p = disc_probability(x - belief.x, y - belief.y, self.radius, belief, ops)
+        p = disc_probability(x - belief.x, y - belief.y, self.radius, belief, ops, gate)
         return p * self.severity.expected(v, th, belief, ops)
 
     def risk(self, ego, belief, rng=None):
@@ -176,7 +180,7 @@ class ExactRisk(RiskEstimator):
         hy = np.maximum(belief.half_y, GEOMETRY_FLOOR)
         near = signed_box_distance(x - belief.x, y - belief.y, hx, hy) < self.radius
         if np.all(near):
-            return np.asarray(self._risk(ego, belief, NUMPY))
+            return np.asarray(self._risk(ego, belief, NUMPY, gate=False))
         shape = np.broadcast_shapes(near.shape, np.shape(belief.x))
         out = np.zeros(shape)
         if np.any(near):
@@ -185,7 +189,7 @@ class ExactRisk(RiskEstimator):
             fields = {
                 f: np.broadcast_to(np.asarray(getattr(belief, f), float), shape)[near] for f in _BELIEF_FIELDS
             }
-            out[near] = self._risk(ego_b, Belief(**fields), NUMPY)
+            out[near] = self._risk(ego_b, Belief(**fields), NUMPY, gate=False)
         return out
 
 
