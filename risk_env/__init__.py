@@ -1,6 +1,7 @@
 """RiskCrossing: the paper's crossing-object scenario, its models and risk estimators.
 
-Importing the package registers ``"RiskCrossing-v0"`` with Gymnasium (safe to import twice).
+Importing the package registers ``"RiskCrossing-v0"`` with Gymnasium (safe to import twice), with
+its batched numpy form as the ``vector_entry_point`` of ``gym.make_vec``.
 """
 
 import gymnasium as _gym
@@ -17,6 +18,7 @@ from risk_env.risk import (
 )
 from risk_env.scenario import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
 from risk_env.severity import Severity, make_severity
+from risk_env.variations import Variations
 
 __all__ = [
     "ENV_ID",
@@ -31,6 +33,7 @@ __all__ = [
     "RiskEstimator",
     "Scenario",
     "Severity",
+    "Variations",
     "WorstCaseRisk",
     "make_estimator",
     "make_severity",
@@ -39,4 +42,8 @@ __all__ = [
 ]
 
 if ENV_ID not in _gym.registry:
-    _gym.register(id=ENV_ID, entry_point="risk_env.env:RiskCrossingEnv")
+    _gym.register(
+        id=ENV_ID,
+        entry_point="risk_env.env:RiskCrossingEnv",
+        vector_entry_point="risk_env.vector_env:RiskCrossingVectorEnv",
+    )

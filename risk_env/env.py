@@ -20,10 +20,12 @@ from gymnasium import spaces
 
 from risk_env import dynamics, observation
 from risk_env.ops import NUMPY
-from risk_env.path import path_error_vector, project
-from risk_env.prediction import Belief, predict
+from risk_env.path import project
+from risk_env.prediction import predict
 from risk_env.risk import RiskEstimator, make_estimator
 from risk_env.scenario import OVERRIDES, Scenario
+from risk_env.transition import move_object, observe, reward_terms
+from risk_env.variations import Variations, vary
 
 ENV_ID = "RiskCrossing-v0"
 OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
@@ -125,6 +127,11 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     last input (at rest by default), the object at ``scenario.object.start`` with its constant
     inputs ``(object.speed, object.turn_rate)``. A seed only seeds ``self.np_random``.
 
+    With ``randomize=True`` each reset draws the episode's scenario from ``self.np_random``
+    (:func:`risk_env.variations.vary`: path curvature, ego start relative to the path, object
+    start and speed); ``env.unwrapped.scenario`` is then the current episode's scenario and
+    ``env.unwrapped.base_scenario`` the one given.
+
     ## Episode End
 
     - terminated: a collision (centre distance <= r_e + r_o), or the goal is reached (the
@@ -146,6 +153,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
       ``"worst_case"`` or ``"grid"`` (:data:`risk_env.ESTIMATOR_NAMES`);
     - ``object_motion``: ``"paper"`` or ``"sampled"`` (see Transition);
     - ``reward_risk_weight``: w >= 0 of the reward's risk term;
+    - ``randomize``: draw each episode's scenario around the given one (see Starting State);
+      ``variations``: the ranges, a :class:`risk_env.Variations`;
     - ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"`` (pygame; see
       :mod:`risk_env.rendering`);
     - ``**overrides``: flat scenario parameters, :data:`risk_env.scenario.OVERRIDES`, e.g.
@@ -182,7 +191,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
-    - v0: initial version.
+    - v0: initial version; ``randomize`` and the vectorised form
+      (``gym.make_vec("RiskCrossing-v0", num_envs=...)``, :mod:`risk_env.vector_env`) added.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 2.0}
@@ -198,10 +208,20 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         object_motion: str = "paper",
         reward_risk_weight: float = 0.0,
         scenario: Scenario | None = None,
+        randomize: bool = False,
+        variations: Variations | None = None,
         **overrides: Any,
     ) -> None:
-        self.scenario: Scenario = _build_scenario(uncertainty, risk_tolerance, scenario, overrides)
-        """The scenario in use; its ``risk_tolerance`` is the env's epsilon."""
+        self.base_scenario: Scenario = _build_scenario(uncertainty, risk_tolerance, scenario, overrides)
+        """The scenario given at construction (the episodes' own with ``randomize=False``)."""
+        self.scenario: Scenario = self.base_scenario
+        """The current episode's scenario; its ``risk_tolerance`` is the env's epsilon."""
+        if variations is not None and not isinstance(variations, Variations):
+            raise TypeError(f"variations must be a risk_env.Variations, got {type(variations).__name__}")
+        if variations is not None and not randomize:
+            raise ValueError("variations= is used only with randomize=True")
+        self.randomize = bool(randomize)
+        self.variations: Variations = Variations() if variations is None else variations
         if object_motion not in OBJECT_MOTIONS:
             raise ValueError(f"unknown object_motion {object_motion!r}; expected one of {OBJECT_MOTIONS}")
         self.object_motion = object_motion
@@ -265,10 +285,14 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Start a new episode (deterministic start state); ``options`` takes no keys."""
+        """Start a new episode (the scenario's start, or a drawn variation of it with
+        ``randomize=True``); ``options`` takes no keys."""
         super().reset(seed=seed)
         if options:
             raise ValueError(f"RiskCrossing-v0 takes no reset options, got {sorted(options)}")
+        if self.randomize:
+            self.scenario = vary(self.base_scenario, self.np_random, self.variations)
+            self.close()  # the renderer draws the previous episode's path
         s = self.scenario
         self._ego_pose = s.ego.start.as_tuple()
         self._ego_input = s.ego.initial_input
@@ -292,7 +316,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._ego_input = (v, omega)
         # 2. the object moves; B = its one-step belief from the measurement before the move
         belief = predict(s, self._object, steps=1)[1]
-        self._object = self._move_object(belief)
+        uniforms = self.np_random.random(3) if self.object_motion == "sampled" else None
+        self._object = tuple(float(a) for a in move_object(belief, self._object, uniforms))
         # 3. the risk R_{k+1|k} of the ego's new state against B
         ego_state = np.array((*self._ego_pose, v))
         risk = float(self.estimator.risk(ego_state, belief, rng=self.np_random))
@@ -387,47 +412,29 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             )
         return v, omega
 
-    def _move_object(self, belief: Belief) -> tuple[float, float, float, float, float]:
-        """The object's next measurement ``(c1, c2, theta, v, omega)`` given its one-step belief."""
-        _, _, _, speed, omega = self._object
-        if self.object_motion == "paper":
-            # B's mean is the object's unicycle step with its constant inputs.
-            return (float(belief.x), float(belief.y), float(belief.theta), speed, omega)
-        cx, cy, v = belief.sample(self.np_random)
-        return (float(cx), float(cy), float(belief.theta), float(v), omega)
-
     def _observe(self, risk: float, stepped: bool) -> tuple[np.ndarray, dict[str, Any], bool]:
         """Observation, info and whether the goal is reached; the reward terms are 0 at reset."""
         s = self.scenario
-        x, y, theta = self._ego_pose
-        v, omega = self._ego_input
-        ox, oy, otheta, ov, oomega = self._object
-        error, lam = path_error_vector(s.path, self._ego_pose, v, s.ego.v_ref)
-        rewards = {
-            "path_error": 0.0 - math.sqrt(float(error @ error)) if stepped else 0.0,
-            "risk": 0.0 - self.reward_risk_weight * risk if stepped else 0.0,
-        }
-        wrap = NUMPY.wrap_angle
-        obs = np.array(
-            (x, y, wrap(theta), v, omega, ox, oy, wrap(otheta), ov, oomega, lam, *error), dtype=np.float32
+        seen = observe(
+            s.path, s.ego.v_ref, s.collision_distance, self._ego_pose, self._ego_input, self._object
         )
-        distance = math.hypot(x - ox, y - oy)
-        collision = distance <= s.collision_distance
-        goal = lam >= s.path.lambda_goal
+        terms = reward_terms(seen.path_error, risk, self.reward_risk_weight)
+        rewards = {name: float(value) if stepped else 0.0 for name, value in terms.items()}
+        collision, goal = bool(seen.collision), bool(seen.goal)
         info = {
             "risk": risk,
             "cost": risk,
             "risk_violation": risk > s.risk_tolerance,
             "collision": collision,
-            "distance": distance,
-            "path_error": error,
-            "lambda": lam,
-            "ego": np.array((x, y, theta, v)),
-            "object": np.array((ox, oy, otheta, ov)),
+            "distance": float(seen.distance),
+            "path_error": seen.path_error,
+            "lambda": float(seen.lam),
+            "ego": np.array((*self._ego_pose, self._ego_input[0])),
+            "object": np.array(self._object[:4]),
             "rewards": rewards,
             "is_success": goal and not collision,
         }
-        return obs, info, goal
+        return seen.obs, info, goal
 
 
 def _build_scenario(

@@ -4,11 +4,15 @@ The arc of :class:`~risk_env.scenario.ReferencePath` is written in the goal's fr
 ``l_x = l sinc(kappa l)``, ``l_y = l (kappa l / 2) sinc(kappa l / 2)^2``, smooth for any kappa
 including 0, and defined for every arc length: beyond lambda_g it continues the arc, so an MPC
 horizon never runs off the path.
+
+Every function takes a :class:`~risk_env.scenario.ReferencePath` (floats) or a :class:`PathBatch`
+(one path per batch entry, numpy arrays), so a batch of environments with different paths is
+stepped with the same formulas.
 """
 
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,7 +21,46 @@ from risk_env.ops import NUMPY, Ops
 from risk_env.scenario import ReferencePath
 
 
-def point(path: ReferencePath, lam: Any, ops: Ops = NUMPY) -> tuple[Any, Any, Any]:
+@dataclass
+class _GoalBatch:
+    x: np.ndarray
+    y: np.ndarray
+    theta: np.ndarray
+
+
+@dataclass
+class PathBatch:
+    """Arcs of a batch, one per entry: the fields of :class:`ReferencePath` as arrays ``(B,)``.
+
+    Mutable so that a vectorised env can re-pose one entry in place on reset.
+    """
+
+    curvature: np.ndarray
+    """kappa ``(B,)`` [1/m]."""
+    goal: _GoalBatch
+    """Goal poses: ``x``, ``y`` [m], ``theta`` [rad], each ``(B,)``."""
+    lambda_goal: float = 0.0
+
+    @classmethod
+    def of(cls, path: ReferencePath, size: int) -> PathBatch:
+        """``size`` copies of ``path``."""
+        g = path.goal
+        return cls(
+            np.full(size, path.curvature),
+            _GoalBatch(np.full(size, g.x), np.full(size, g.y), np.full(size, g.theta)),
+        )
+
+    def set(self, index: int | np.ndarray, path: ReferencePath) -> None:
+        """Make entry ``index`` equal to ``path``."""
+        self.curvature[index] = path.curvature
+        self.goal.x[index], self.goal.y[index], self.goal.theta[index] = path.goal.as_tuple()
+
+
+AnyPath = ReferencePath | PathBatch
+"""A single path (floats) or a batch (arrays)."""
+
+
+def point(path: AnyPath, lam: Any, ops: Ops = NUMPY) -> tuple[Any, Any, Any]:
     """``y_P(lambda)``: ``(c1 [m], c2 [m], theta_P [rad])`` at arc length ``lam`` [m]."""
     k = path.curvature
     a = k * lam
@@ -25,31 +68,35 @@ def point(path: ReferencePath, lam: Any, ops: Ops = NUMPY) -> tuple[Any, Any, An
     s = ops.sinc(0.5 * a)
     ly = lam * 0.5 * a * s * s
     g = path.goal
-    cg, sg = math.cos(g.theta), math.sin(g.theta)
+    cg, sg = np.cos(g.theta), np.sin(g.theta)
     return g.x + cg * lx - sg * ly, g.y + sg * lx + cg * ly, g.theta + a
 
 
-def project(path: ReferencePath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
+def project(path: AnyPath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
     """Arc length [m] of the closest point of the (continued) path to ``(x, y)`` [m]."""
     g = path.goal
-    cg, sg = math.cos(g.theta), math.sin(g.theta)
+    cg, sg = np.cos(g.theta), np.sin(g.theta)
     px = cg * (x - g.x) + sg * (y - g.y)
     py = -sg * (x - g.x) + cg * (y - g.y)
     k = path.curvature
+    # the angle subtended at the arc's centre, atan2(k px, 1 - k py), over k; px on a line
+    if isinstance(k, np.ndarray):
+        straight = k == 0.0
+        lam = ops.atan2(k * px, 1.0 - k * py) / np.where(straight, 1.0, k)
+        return np.where(straight, px, lam)
     if k == 0.0:
         return px
-    sign = 1.0 if k > 0 else -1.0
-    return ops.atan2(sign * px, -sign * (py - 1.0 / k)) / k
+    return ops.atan2(k * px, 1.0 - k * py) / k
 
 
-def timing_law(path: ReferencePath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY) -> Any:
+def timing_law(path: AnyPath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY) -> Any:
     """``lambda+ = lambda + u2 cos(theta - theta_P(lambda)) T`` (paper Sec. VI-B)."""
     theta_p = path.goal.theta + path.curvature * lam
     return lam + u2 * ops.cos(theta - theta_p) * dt
 
 
 def path_error(
-    path: ReferencePath,
+    path: AnyPath,
     x: Any,
     y: Any,
     theta: Any,

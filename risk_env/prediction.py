@@ -20,6 +20,7 @@ from risk_env.dynamics import unicycle_step
 from risk_env.ops import NUMPY, Ops
 from risk_env.scenario import Scenario
 from risk_env.truncnorm import sample as truncnorm_sample
+from risk_env.truncnorm import transform as truncnorm_transform
 
 
 @dataclass(frozen=True)
@@ -75,11 +76,19 @@ class Belief:
     def sample(self, rng: np.random.Generator, size: int | tuple[int, ...] = ()) -> np.ndarray:
         """Draws ``(size..., batch..., 3)`` of (c1 [m], c2 [m], v [m/s]) from ``rng``."""
         size = (size,) if isinstance(size, int) else tuple(size)
+        return truncnorm_sample(*self._marginals(), rng, size)
+
+    def from_uniforms(self, u: np.ndarray) -> np.ndarray:
+        """The draws :meth:`sample` makes from the uniforms ``u (..., batch..., 3)`` on [0, 1)."""
+        return truncnorm_transform(u, *self._marginals())
+
+    def _marginals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Mean, sigma, lower and upper bound of (c1, c2, v), each ``(batch..., 3)``."""
         mean = np.stack(np.broadcast_arrays(self.x, self.y, self.speed), axis=-1)
         sigma = np.stack(np.broadcast_arrays(self.sigma_x, self.sigma_y, self.sigma_v), axis=-1)
         lo = np.stack(np.broadcast_arrays(self.x - self.half_x, self.y - self.half_y, self.v_lo), axis=-1)
         hi = np.stack(np.broadcast_arrays(self.x + self.half_x, self.y + self.half_y, self.v_hi), axis=-1)
-        return truncnorm_sample(mean, sigma, lo, hi, rng, size)
+        return mean, sigma, lo, hi
 
 
 def predict(

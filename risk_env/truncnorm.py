@@ -26,9 +26,16 @@ def sample(
     Inverse-CDF sampling, done on the side of the mean where the tail is thin so that far tails
     keep their precision. A zero ``sigma`` or a zero-width interval gives the clipped mean.
     """
+    shape = tuple(size) + np.broadcast_shapes(*(np.shape(a) for a in (mean, sigma, lo, hi)))
+    return transform(rng.random(shape), mean, sigma, lo, hi)
+
+
+def transform(
+    u: np.ndarray, mean: np.ndarray, sigma: np.ndarray, lo: np.ndarray, hi: np.ndarray
+) -> np.ndarray:
+    """The inverse-CDF map of :func:`sample`: uniforms ``u`` on [0, 1) to truncated-normal draws
+    (shape of ``u`` broadcast with the parameters)."""
     mean, sigma, lo, hi = np.broadcast_arrays(*(np.asarray(a, float) for a in (mean, sigma, lo, hi)))
-    shape = tuple(size) + mean.shape
-    u = rng.random(shape)
     degenerate = (sigma <= SIGMA_FLOOR) | (hi <= lo)
     s = np.where(degenerate, 1.0, sigma)
     a = (lo - mean) / s

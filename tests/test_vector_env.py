@@ -1,0 +1,133 @@
+"""The batched env: the same numbers as Gymnasium's vector envs of single envs, and clear errors."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import risk_env
+from risk_env.vector_env import RiskCrossingVectorEnv
+
+
+def _flatten(tree, prefix=""):
+    """Leaves of (nested) info dicts as ``{path: array}``; object arrays of final_obs expanded."""
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f"{prefix}{key}/"))
+        elif key == "final_obs":
+            for i, obs in enumerate(value):
+                out[f"{prefix}{key}/{i}"] = np.zeros(0) if obs is None else obs
+        else:
+            out[f"{prefix}{key}"] = np.asarray(value)
+    return out
+
+
+def _run(mode: str, autoreset: AutoresetMode, steps: int, num_envs: int = 3, **kwargs):
+    if mode == "vector_entry_point":
+        env = gym.make_vec(risk_env.ENV_ID, num_envs, mode, autoreset_mode=autoreset, **kwargs)
+    else:
+        env = gym.make_vec(
+            risk_env.ENV_ID, num_envs, mode, vector_kwargs={"autoreset_mode": autoreset}, **kwargs
+        )
+    rng = np.random.default_rng(7)
+    results = [env.reset(seed=11)]
+    for _ in range(steps):
+        action = np.stack([rng.uniform(-1.0, 8.0, num_envs), rng.uniform(-0.8, 0.8, num_envs)], axis=-1)
+        results.append(env.step(action.astype(np.float32)))
+    env.close()
+    return results
+
+
+def _assert_same(a, b) -> None:
+    ends = 0
+    for step_a, step_b in zip(a, b, strict=True):
+        for part_a, part_b in zip(step_a, step_b, strict=True):
+            if isinstance(part_a, dict):
+                fa, fb = _flatten(part_a), _flatten(part_b)
+                assert fa.keys() == fb.keys()
+                for key in fa:
+                    np.testing.assert_allclose(fa[key], fb[key], rtol=1e-12, atol=1e-12, err_msg=key)
+            else:
+                np.testing.assert_allclose(part_a, part_b, rtol=1e-12, atol=1e-12)
+        if len(step_a) == 5:
+            ends += int(np.sum(step_a[2] | step_a[3]))
+    assert ends >= 2, "the comparison should cover episode ends"
+
+
+@pytest.mark.parametrize("autoreset", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {},
+        {"randomize": True, "object_motion": "sampled", "uncertainty": "high", "risk_tolerance": 100.0},
+        {"risk_estimator": "monte_carlo", "object_motion": "sampled", "mc_samples": 50},
+    ],
+)
+def test_batched_equals_sync(autoreset, kwargs) -> None:
+    _assert_same(_run("sync", autoreset, 90, **kwargs), _run("vector_entry_point", autoreset, 90, **kwargs))
+
+
+def test_batched_equals_async() -> None:
+    kwargs = {"randomize": True, "object_motion": "sampled"}
+    _assert_same(
+        _run("async", AutoresetMode.NEXT_STEP, 50, num_envs=2, max_steps=20, **kwargs),
+        _run("vector_entry_point", AutoresetMode.NEXT_STEP, 50, num_envs=2, max_steps=20, **kwargs),
+    )
+
+
+def test_default_mode_is_batched() -> None:
+    env = gym.make_vec(risk_env.ENV_ID, num_envs=4)
+    assert isinstance(env.unwrapped, RiskCrossingVectorEnv)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (4, 15) and obs.dtype == np.float32
+    assert env.observation_space.contains(obs)
+    assert info["risk"].shape == (4,) and info["path_error"].shape == (4, 4)
+
+
+def test_disabled_autoreset_needs_masked_reset() -> None:
+    env = RiskCrossingVectorEnv(num_envs=2, autoreset_mode="disabled", max_steps=2)
+    env.reset(seed=0)
+    action = np.tile([4.0, 0.0], (2, 1))
+    env.step(action)
+    *_, truncated, _ = env.step(action)
+    assert truncated.all()
+    with pytest.raises(gym.error.ResetNeeded, match="reset_mask"):
+        env.step(action)
+    obs, _ = env.reset(options={"reset_mask": np.array([True, False])})
+    first, _ = RiskCrossingVectorEnv(num_envs=1).reset(seed=0)
+    np.testing.assert_array_equal(obs[0], first[0])
+    assert not np.array_equal(obs[1], first[0])
+
+
+@pytest.mark.parametrize(
+    ("action", "match"),
+    [
+        (np.array([[4.0, 0.0], [np.nan, 0.0]]), r"copies \[1\] are non-finite"),
+        (np.array([[4.0, 0.0], [4.0, 2.0]]), r"copies \[1\] are outside"),
+        (np.array([4.0, 0.0]), r"shape \(2, 2\)"),
+    ],
+)
+def test_bad_actions_name_the_copy(action, match) -> None:
+    env = RiskCrossingVectorEnv(num_envs=2)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=match):
+        env.step(action)
+
+
+def test_bad_construction() -> None:
+    with pytest.raises(ValueError, match="num_envs"):
+        RiskCrossingVectorEnv(num_envs=0)
+    with pytest.raises(TypeError, match="object_sped"):
+        RiskCrossingVectorEnv(num_envs=2, object_sped=2.0)
+    with pytest.raises(ValueError, match="does not render"):
+        RiskCrossingVectorEnv(num_envs=2, render_mode="rgb_array")
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        RiskCrossingVectorEnv(num_envs=2, autoreset_mode="sometimes")
+    env = RiskCrossingVectorEnv(num_envs=2)
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="reset option"):
+        env.reset(options={"mask": None})
