@@ -1,4 +1,5 @@
-"""One rollout loop for every agent: anything with SB3's ``predict`` runs in ``RiskCrossing-v0``."""
+"""One rollout loop for every agent: anything with SB3's ``predict`` runs in ``RiskCrossing-v0``;
+and the agents the benchmarks know by name (:data:`AGENTS`, :func:`build_agent`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,40 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+AGENTS: dict[str, tuple[str, str]] = {
+    "rmpc:worst_case": ("RMPC", "worst_case"),
+    "rmpc:grid": ("RMPC", "grid"),
+    "smpc:exact": ("SMPC", "exact"),
+    "smpc:monte_carlo": ("SMPC", "monte_carlo"),
+    "ppo:penalty": ("PPO", "penalty"),
+    "ppo:lagrangian": ("PPO", "lagrangian"),
+}
+"""Benchmark names -> (method, variant): the risk estimator of an MPC, the training of a PPO policy."""
+
+
+def available_agents() -> list[str]:
+    """The names of :data:`AGENTS` this installation can run (PPO needs the ``rl`` extra)."""
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        return [name for name, (method, _) in AGENTS.items() if method != "PPO"]
+    return list(AGENTS)
+
+
+def build_agent(method: str, variant: str, env: gym.Env, seed: int = 0, **options: Any) -> Any:
+    """The agent ``(method, variant)`` of :data:`AGENTS` for ``env``'s scenario and tolerance."""
+    if method == "PPO":
+        from agents.ppo import PPOAgent, shipped_model
+
+        return PPOAgent.load(shipped_model(variant), scenario=env.unwrapped.scenario)
+    from agents import RMPC, SMPC
+
+    if method == "RMPC":
+        return RMPC.from_env(env, risk=variant, **options)
+    if method == "SMPC":
+        return SMPC.from_env(env, risk=variant, seed=seed, **options)
+    raise ValueError(f"unknown method {method!r}; expected RMPC, SMPC or PPO")
 
 
 @dataclass

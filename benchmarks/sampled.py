@@ -23,15 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.rollout import rollout
+from benchmarks.rollout import AGENTS, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
 
-AGENTS = {
-    "rmpc:worst_case": ("RMPC", "worst_case"),
-    "smpc:exact": ("SMPC", "exact"),
-    "smpc:monte_carlo": ("SMPC", "monte_carlo"),
-    "rmpc:grid": ("RMPC", "grid"),
-}
 COLUMNS = (
     "agent",
     "severity",
@@ -79,7 +73,6 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     import gymnasium as gym
 
     import risk_env  # noqa: F401
-    from agents import RMPC, SMPC
     from risk_env.ops import NUMPY
     from risk_env.severity import make_severity
 
@@ -90,8 +83,7 @@ def run_job(job: Job) -> list[dict[str, Any]]:
         severity=job.severity,
         object_motion="sampled",
     )
-    method, risk = AGENTS[job.agent]
-    agent = RMPC.from_env(env, risk=risk) if method == "RMPC" else SMPC.from_env(env, risk=risk)
+    agent = build_agent(*AGENTS[job.agent], env)
     severity = make_severity(env.unwrapped.scenario)
     out = []
     for seed in job.seeds:
@@ -174,7 +166,9 @@ def markdown(rows: list[dict[str, Any]]) -> str:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m benchmarks.sampled", description=__doc__.split("\n\n")[0])
     p.add_argument(
-        "--agents", default="rmpc:worst_case,smpc:exact,smpc:monte_carlo", help=f"from {list(AGENTS)}"
+        "--agents",
+        default=None,
+        help=f"comma list from {list(AGENTS)} (default: all but the grid RMPC; PPO with the rl extra)",
     )
     p.add_argument("--severities", default="paper,plastic", help="comma list of paper, plastic, probability")
     p.add_argument("--uncertainty", default="medium", help="comma list of low, medium, high")
@@ -185,7 +179,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS")
     args = p.parse_args(argv)
-    args.agents = [a for a in args.agents.split(",") if a]
+    if args.agents is None:
+        args.agents = [a for a in available_agents() if a != "rmpc:grid"]
+    else:
+        args.agents = [a for a in args.agents.split(",") if a]
     if bad := [a for a in args.agents if a not in AGENTS]:
         p.error(f"unknown agent(s) {bad}; expected from {list(AGENTS)}")
     args.severities = [s for s in args.severities.split(",") if s]

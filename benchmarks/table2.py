@@ -20,15 +20,10 @@ from typing import Any
 import numpy as np
 
 from benchmarks.paper_table2 import PAPER, TOLERANCES
-from benchmarks.rollout import EpisodeRecord, rollout
+from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
 
-METHODS: dict[str, tuple[str, str]] = {
-    "rmpc:worst_case": ("RMPC", "worst_case"),
-    "rmpc:grid": ("RMPC", "grid"),
-    "smpc:exact": ("SMPC", "exact"),
-    "smpc:monte_carlo": ("SMPC", "monte_carlo"),
-}
+METHODS = AGENTS
 LEVELS = ("low", "medium", "high")
 CSV_COLUMNS = (
     "method",
@@ -71,12 +66,7 @@ class RunSpec:
 
 def make_agent(spec: RunSpec, env: Any) -> Any:
     """The agent a spec names, built for the env's scenario (agents read only observations)."""
-    from agents import RMPC, SMPC
-
-    options = dict(spec.agent_options)
-    if spec.method == "RMPC":
-        return RMPC.from_env(env, risk=spec.risk_method, **options)
-    return SMPC.from_env(env, risk=spec.risk_method, seed=spec.seed, **options)
+    return build_agent(spec.method, spec.risk_method, env, spec.seed, **dict(spec.agent_options))
 
 
 def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -277,7 +267,11 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m benchmarks.table2", description=__doc__.split("\n\n")[0])
-    p.add_argument("--methods", default=",".join(METHODS), help=f"comma list of {', '.join(METHODS)}")
+    p.add_argument(
+        "--methods",
+        default=None,
+        help=f"comma list of {', '.join(METHODS)} (default: all; PPO when the rl extra is installed)",
+    )
     p.add_argument("--uncertainty", default="low,medium,high", help="comma list of low, medium, high")
     p.add_argument(
         "--tolerances", default=",".join(f"{t:g}" for t in TOLERANCES), help="comma list of epsilon [J]"
@@ -291,7 +285,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS", help="run on Ray")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     args = p.parse_args(argv)
-    args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if args.methods is None:
+        args.methods = available_agents()
+        if len(args.methods) < len(METHODS):
+            print("PPO rows skipped: pip install 'riskcrossing[rl]' to score the shipped PPO policies")
+    else:
+        args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = [m for m in args.methods if m not in METHODS]
     if unknown:
         p.error(f"unknown method(s) {unknown}; expected from {list(METHODS)}")

@@ -1,0 +1,172 @@
+"""The PPO baseline: what the policy sees, how its actions become inputs, and loading a trained one.
+
+A policy trained by ``python -m benchmarks.train_ppo`` acts through two fixed maps, used alike in
+training (as Gymnasium vector wrappers) and by :class:`PPOAgent`:
+
+- :func:`features`: the 15-float observation -> 14 scaled features in the ego's frame (path
+  error, own input, the object's relative position, heading and velocity, distance, progress);
+- :func:`to_inputs`: the policy's action in [-1, 1]^2 -> the change of ``(v, omega)`` within one
+  step's rate limits (``accel_max dt``, ``omega_rate_max dt``), clipped to the input limits, so a
+  learned policy obeys the same rate limits as the MPCs.
+
+Needs the ``rl`` extra (``pip install "riskcrossing[rl]"``: torch CPU and stable-baselines3).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.base import as_batch
+from risk_env import observation as layout
+from risk_env.scenario import Scenario
+
+FEATURES = 14
+"""Length of :func:`features`."""
+_SCALE = np.array([5.0, 5.0, 1.0, 4.0, 4.0, 0.8, 20.0, 20.0, 1.0, 1.0, 8.0, 8.0, 20.0, 100.0])
+"""Divisors of the raw features [m, m, rad, m/s, m/s, rad/s, m, m, -, -, m/s, m/s, m, m]."""
+SHIPPED = Path(__file__).resolve().parent / "models"
+"""The trained policies that ship with the package: ``ppo_penalty`` and ``ppo_lagrangian``."""
+METADATA_SUFFIX = ".json"
+"""A model ``policy.zip`` ships with ``policy.json``: the limits it acts within and how it was trained."""
+
+
+def shipped_model(variant: str) -> Path:
+    """The shipped policy of a training variant, ``"penalty"`` or ``"lagrangian"``."""
+    path = SHIPPED / f"ppo_{variant}.zip"
+    if not path.is_file():
+        known = sorted(p.stem.removeprefix("ppo_") for p in SHIPPED.glob("ppo_*.zip"))
+        raise ValueError(f"no shipped PPO policy {variant!r}; shipped: {known}")
+    return path
+
+
+def features(obs: np.ndarray) -> np.ndarray:
+    """Scaled features ``(B, 14)`` float32 of observations ``(B, 15)`` (or ``(14,)`` of ``(15,)``)."""
+    o = np.asarray(obs, dtype=float)
+    single = o.ndim == 1
+    o = np.atleast_2d(o)
+    x, y, theta = (o[:, i] for i in range(3))
+    v, omega = o[:, 3], o[:, 4]
+    ox, oy, otheta, ov = (o[:, i] for i in (5, 6, 7, 8))
+    c, s = np.cos(theta), np.sin(theta)
+    dx, dy = ox - x, oy - y
+    rel_heading = otheta - theta
+    # the object's velocity relative to the ego's, in the ego's frame
+    vx = ov * np.cos(rel_heading) - v
+    vy = ov * np.sin(rel_heading)
+    raw = np.stack(
+        (
+            *(o[:, layout.PATH_ERROR].T),
+            v,
+            omega,
+            c * dx + s * dy,
+            -s * dx + c * dy,
+            np.cos(rel_heading),
+            np.sin(rel_heading),
+            vx,
+            vy,
+            np.hypot(dx, dy),
+            o[:, layout.PROGRESS],
+        ),
+        axis=-1,
+    )
+    out = (raw / _SCALE).astype(np.float32)
+    return out[0] if single else out
+
+
+@dataclass(frozen=True)
+class InputLimits:
+    """The input and rate limits an action is mapped into (from a Scenario's ego)."""
+
+    v_min: float
+    v_max: float
+    omega_max: float
+    dv_max: float
+    """Largest speed change per step [m/s] (accel_max dt)."""
+    domega_max: float
+    """Largest turn-rate change per step [rad/s] (omega_rate_max dt)."""
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> InputLimits:
+        e = scenario.ego
+        return cls(e.v_min, e.v_max, e.omega_max, e.accel_max * scenario.dt, e.omega_rate_max * scenario.dt)
+
+
+def to_inputs(action: np.ndarray, last_input: np.ndarray, limits: InputLimits) -> np.ndarray:
+    """Inputs ``(B, 2)`` (v [m/s], omega [rad/s]) from policy actions ``(B, 2)`` in [-1, 1] (clipped)
+    and the last applied inputs ``(B, 2)``."""
+    a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
+    last = np.asarray(last_input, dtype=float)
+    v = np.clip(last[..., 0] + a[..., 0] * limits.dv_max, limits.v_min, limits.v_max)
+    omega = np.clip(last[..., 1] + a[..., 1] * limits.domega_max, -limits.omega_max, limits.omega_max)
+    return np.stack((v, omega), axis=-1)
+
+
+class PPOAgent:
+    """A trained stable-baselines3 PPO policy with the MPC agents' ``predict`` API.
+
+    ``predict`` takes RiskCrossing-v0 observations ``(15,)`` or ``(B, 15)`` and returns inputs in
+    physical units ``(2,)`` or ``(B, 2)``, within the scenario's input and rate limits.
+    """
+
+    def __init__(self, model: Any, limits: InputLimits, metadata: dict[str, Any] | None = None) -> None:
+        self.model = model
+        self.limits = limits
+        self.metadata: dict[str, Any] = dict(metadata or {})
+        """How the policy was trained (the training arguments, wall time, steps/s), as saved."""
+        self.last_solve = None
+        """Always None: a policy has no solve to report (the rollout records its predict time)."""
+
+    @classmethod
+    def load(cls, path: str | Path, scenario: Scenario | None = None) -> PPOAgent:
+        """Load ``path`` (an SB3 ``.zip``) and its ``.json`` metadata beside it.
+
+        The input limits are the saved ones, or ``scenario``'s when given (a different car).
+        """
+        from stable_baselines3 import PPO
+
+        path = Path(path)
+        zip_path = path if path.suffix == ".zip" else path.with_suffix(".zip")
+        if not zip_path.is_file():
+            raise FileNotFoundError(
+                f"no PPO model at {zip_path}; train one with python -m benchmarks.train_ppo"
+            )
+        meta_path = zip_path.with_suffix(METADATA_SUFFIX)
+        metadata = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        if scenario is not None:
+            limits = InputLimits.of(scenario)
+        elif "limits" in metadata:
+            limits = InputLimits(**metadata["limits"])
+        else:
+            raise ValueError(f"{meta_path} is missing: pass scenario= to set the input limits")
+        if metadata.get("features", FEATURES) != FEATURES:
+            raise ValueError(
+                f"{zip_path} was trained on {metadata['features']} features; this version has {FEATURES}"
+            )
+        model = PPO.load(zip_path, device="cpu")
+        return cls(model, limits, metadata)
+
+    def reset(self) -> None:
+        """Nothing to reset (the policy is memoryless); for the rollout loop's sake."""
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, None]:
+        """Inputs for ``observation (15,)`` or ``(B, 15)``; raises on a wrong shape or a NaN."""
+        start = time.perf_counter()
+        obs, single = as_batch(observation, layout.SIZE)
+        if not np.all(np.isfinite(obs)):
+            raise ValueError(f"observation has non-finite entries: {observation}")
+        action, _ = self.model.predict(features(obs), deterministic=deterministic)
+        inputs = to_inputs(action, obs[:, layout.EGO_INPUT], self.limits)
+        self.predict_time = time.perf_counter() - start
+        return (inputs[0] if single else inputs), None

@@ -1,0 +1,228 @@
+"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk penalty (stable-baselines3).
+
+    python -m benchmarks.train_ppo --out agents/models --name ppo_penalty          # the shipped policies
+    python -m benchmarks.train_ppo --lagrangian --risk-weight 20 --out agents/models --name ppo_lagrangian
+    python -m benchmarks.train_ppo --total-timesteps 4096 --out /tmp/ppo   # a smoke run
+
+Reward per step: ``-||e_{k+1}|| - beta * cost`` with cost = the env's risk R_{k+1|k} (the
+``reward_risk_weight`` of the env). ``--lagrangian`` adapts beta after every rollout by dual
+ascent, ``beta <- max(0, beta + dual_lr (mean episode cost - cost_limit))``. Writes
+``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits, wall time and training
+throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's CSV log in ``OUT/NAME_logs``;
+:meth:`agents.ppo.PPOAgent.load` reads the model back.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Args:
+    """Every option of the training run (each is a ``--flag`` of the CLI)."""
+
+    out: Path = Path("results/ppo")
+    """Where the model, its metadata, checkpoints and logs go."""
+    name: str = "model"
+    """File name of the model (``NAME.zip``, ``NAME.json``)."""
+    total_timesteps: int = 3_000_000
+    """Env steps to train for (over all copies)."""
+    num_envs: int = 64
+    """Copies of the env stepped as one batch."""
+    seed: int = 0
+    uncertainty: str = "medium"
+    """The paper's uncertainty preset the policy trains against."""
+    severity: str = "probability"
+    """Severity of the training cost (the collision probability by default: a bounded cost, and
+    no free collisions at matched kinetic energy as with the paper's severity)."""
+    object_motion: str = "sampled"
+    randomize: bool = True
+    """Train on seeded variations of the scenario (curvature, starts, object speed)."""
+    risk_weight: float = 1000.0
+    """beta: the penalty per unit of cost (the initial value with --lagrangian)."""
+    penalty_warmup: int = 500_000
+    """Env steps at beta = 0 before the penalty switches on (without --lagrangian): the policy
+    first learns to drive, then to keep the risk down."""
+    lagrangian: bool = False
+    """Adapt beta by dual ascent toward cost_limit."""
+    cost_limit: float = 0.02
+    """Per-episode cost the Lagrangian aims at [units of the severity, summed over the episode]."""
+    dual_lr: float = 100.0
+    """Step size of the dual ascent on beta [beta per unit of episode cost]."""
+    n_steps: int = 128
+    """Rollout length per copy between updates."""
+    batch_size: int = 2048
+    n_epochs: int = 5
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    ent_coef: float = 0.0
+    net_arch: tuple[int, ...] = (64, 64)
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian policy (exploration at the start)."""
+    normalize_reward: bool = True
+    """Scale rewards by a running estimate of the return's spread (SB3's VecNormalize)."""
+    checkpoint_every: int = 500_000
+    """Save a checkpoint every this many env steps (0: none)."""
+    progress_bar: bool = True
+
+
+def parse_args(argv: list[str] | None = None) -> Args:
+    """The CLI: one ``--flag`` per field of :class:`Args`."""
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    for f in dataclasses.fields(Args):
+        flag = "--" + f.name.replace("_", "-")
+        default = f.default
+        if isinstance(default, bool):
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default)
+        elif isinstance(default, tuple):
+            parser.add_argument(flag, type=int, nargs="+", default=list(default))
+        else:
+            parser.add_argument(flag, type=type(default), default=default)
+    args = Args(**vars(parser.parse_args(argv)))
+    args.net_arch = tuple(args.net_arch)
+    if args.total_timesteps < 1 or args.num_envs < 1:
+        raise SystemExit("--total-timesteps and --num-envs must be >= 1")
+    return args
+
+
+def make_env(args: Args) -> Any:
+    """The wrapper stack: batched RiskCrossing-v0 -> PolicyView -> SB3 VecEnv -> VecMonitor
+    (episode return, length, cost, collision, success) -> VecNormalize (rewards only)."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    import risk_env
+    from agents.ppo import InputLimits
+    from agents.ppo_env import PolicyView, SB3VecEnv
+
+    env = gym.make_vec(
+        risk_env.ENV_ID,
+        num_envs=args.num_envs,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode="same_step",
+        uncertainty=args.uncertainty,
+        severity=args.severity,
+        object_motion=args.object_motion,
+        randomize=args.randomize,
+        reward_risk_weight=0.0 if args.penalty_warmup > 0 and not args.lagrangian else args.risk_weight,
+    )
+    view = PolicyView(env, InputLimits.of(env.unwrapped.base_scenario))
+    venv = VecMonitor(SB3VecEnv(view), info_keywords=SB3VecEnv.EPISODE_KEYS)
+    return VecNormalize(venv, norm_obs=False, norm_reward=args.normalize_reward, gamma=args.gamma)
+
+
+def make_callbacks(args: Args) -> list[Any]:
+    """Episode statistics (and beta's dual ascent with --lagrangian), checkpoints, progress bar."""
+    from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, ProgressBarCallback
+
+    class RiskStats(BaseCallback):
+        """Logs the episodes finished in each rollout: cost, collision and goal rates, beta; with
+        ``lagrangian`` it then steps beta toward the cost limit (dual ascent)."""
+
+        def __init__(self, lagrangian: bool) -> None:
+            super().__init__()
+            self.lagrangian = lagrangian
+            self.episodes: list[dict[str, float]] = []
+            self.history: list[dict[str, float]] = []
+
+        def _on_step(self) -> bool:
+            for done, info in zip(self.locals["dones"], self.locals["infos"]):
+                if done:
+                    self.episodes.append(
+                        {k: float(info[k]) for k in ("episode_cost", "collision", "is_success")}
+                    )
+            return True
+
+        def _on_rollout_end(self) -> None:
+            beta = float(self.training_env.get_attr("reward_risk_weight")[0])
+            if not self.lagrangian and self.num_timesteps >= args.penalty_warmup and beta != args.risk_weight:
+                beta = args.risk_weight  # the warm-up is over: the fixed penalty switches on
+                self.training_env.set_attr("reward_risk_weight", beta)
+            if not self.episodes:
+                return
+            stats = {k: float(np.mean([e[k] for e in self.episodes])) for k in self.episodes[0]}
+            self.logger.record("risk/episode_cost", stats["episode_cost"])
+            self.logger.record("risk/collision_rate", stats["collision"])
+            self.logger.record("risk/goal_rate", stats["is_success"])
+            self.logger.record("risk/beta", beta)
+            if self.lagrangian:
+                beta = max(0.0, beta + args.dual_lr * (stats["episode_cost"] - args.cost_limit))
+                self.training_env.set_attr("reward_risk_weight", beta)
+            self.history.append({**stats, "beta": beta, "timesteps": float(self.num_timesteps)})
+            self.episodes = []
+
+    callbacks: list[Any] = [RiskStats(args.lagrangian)]
+    if args.checkpoint_every > 0:
+        every = max(args.checkpoint_every // args.num_envs, 1)
+        callbacks.append(
+            CheckpointCallback(every, str(args.out / f"{args.name}_checkpoints"), name_prefix=args.name)
+        )
+    if args.progress_bar:
+        callbacks.append(ProgressBarCallback())
+    return callbacks
+
+
+def train(args: Args) -> dict[str, Any]:
+    """Train, save ``OUT/NAME.zip`` and ``OUT/NAME.json``; returns the metadata written."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import configure
+
+    from agents.ppo import FEATURES, InputLimits
+
+    torch.set_num_threads(1)  # small networks: threads cost more than they give on 2 cores
+    args.out.mkdir(parents=True, exist_ok=True)
+    venv = make_env(args)
+    venv.seed(args.seed)
+    model = PPO(
+        "MlpPolicy",
+        venv,
+        n_steps=args.n_steps,
+        batch_size=args.batch_size,
+        n_epochs=args.n_epochs,
+        learning_rate=args.learning_rate,
+        gamma=args.gamma,
+        gae_lambda=args.gae_lambda,
+        ent_coef=args.ent_coef,
+        policy_kwargs={"net_arch": list(args.net_arch), "log_std_init": args.log_std_init},
+        seed=args.seed,
+        device="cpu",
+    )
+    model.set_logger(configure(str(args.out / f"{args.name}_logs"), ["stdout", "csv"]))
+    callbacks = make_callbacks(args)
+    start = time.perf_counter()
+    model.learn(total_timesteps=args.total_timesteps, callback=callbacks)
+    wall = time.perf_counter() - start
+    model.save(args.out / f"{args.name}.zip")
+    history = callbacks[0].history
+    metadata = {
+        "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(args).items()},
+        "limits": dataclasses.asdict(InputLimits.of(venv.venv.venv.env.unwrapped.base_scenario)),
+        "features": FEATURES,
+        "timesteps": int(model.num_timesteps),
+        "wall_time_s": round(wall, 1),
+        "steps_per_s": round(model.num_timesteps / wall, 1),
+        "final_rollout": history[-1] if history else {},
+    }
+    (args.out / f"{args.name}.json").write_text(json.dumps(metadata, indent=2) + "\n")
+    venv.close()
+    print(
+        f"trained {model.num_timesteps} env steps in {wall:.1f} s ({metadata['steps_per_s']:,.0f} env steps/s"
+        f" including updates); saved {args.out / (args.name + '.zip')}"
+    )
+    return metadata
+
+
+if __name__ == "__main__":
+    train(parse_args())
