@@ -221,6 +221,21 @@ def test_adapter_drives_intersection_v1():
     assert adapter.route.lanes[0] == ("o0", "ir0", 0)
 
 
+def test_adapter_with_several_objects_applies_the_slowest_plan():
+    env = make_intersection_env()
+    adapter = IntersectionAdapter(env, RMPC, objects=3)
+    obs, _ = env.reset(seed=1)
+    for _ in range(3):
+        action, _ = adapter.predict(obs)
+        speeds = [float(r.action[0]) for r in adapter.last_solves]
+        assert 1 <= len(adapter.last_objects) <= 3 and len(speeds) == len(adapter.last_objects)
+        assert adapter.last_solve_time >= adapter.last_solve.solve_time > 0
+        obs, *_ = env.step(action)
+        assert env.unwrapped.vehicle.speed == pytest.approx(min(speeds), abs=1e-6)
+    with pytest.raises(ValueError, match="objects must be an integer >= 1"):
+        IntersectionAdapter(env, RMPC, objects=0)
+
+
 def test_adapter_turn_rate_and_speed_translation():
     # highway_action's steering ends the step at the heading the unicycle predicts.
     env = make_intersection_env()

@@ -18,9 +18,10 @@ that lane's arc (straight on, or round the circle) rather than turning into the 
 plan bends at the hand-over, one step late. The new agent starts cold (no warm start).
 
 **The object.** Our agents plan against one object. Among the observed vehicles, the adapter takes
-the one whose predicted mean (:func:`risk_env.predict`) comes closest, over the horizon, to where
-the ego would be driving the route at ``v_ref``: the most conflicting one, usually the nearest
-vehicle crossing the route. The others are not avoided. Its measurement is observed position,
+the one that conflicts first with the ego driving the route at ``v_ref`` (the first prediction step
+at which its truncation box could reach the ego's disc; ties by the closest predicted approach):
+usually the nearest vehicle crossing the route. The others are not avoided (``objects=k`` plans
+against the k first and applies the slowest plan, a heuristic). Its measurement is observed position,
 heading and speed; its turn rate is the change of its heading since the previous step, when the
 vehicle can be associated with one seen then (within :data:`TRACK_GATE` of where it was predicted),
 else 0. highway-env's observation has no steering, so the heading stands in for the direction of
@@ -47,7 +48,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from risk_env import observation as ob
 from risk_env.dynamics import unicycle_step
 from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
 from risk_env.ops import NUMPY
@@ -224,7 +224,13 @@ class IntersectionAdapter:
         uncertainty, risk_tolerance, **overrides: the scenario,
             :func:`risk_env.highway.highway_scenario` with :data:`ADAPTER_DEFAULTS` first.
         destination: the node the route leads to (default: the env's ``config["destination"]``).
-        switch_ahead: hand over to the next lane this many metres [m] before the end of a lane.
+        switch_ahead: hand over to the next lane this many metres [m] before the end of a lane
+            (2 m: about half a step at v_ref, so the hand-over comes the step before the lane ends).
+        objects: plan against this many of the most conflicting vehicles, one solve each (the
+            agent's batch ``predict``, a warm start per slot), and apply the plan whose first speed
+            is the lowest. 1 (default): the design above, one object. More is the adapter's
+            heuristic, not the paper's method: each plan respects one object's risk bound, and the
+            slowest is not guaranteed to respect the others'.
     """
 
     def __init__(
@@ -235,6 +241,7 @@ class IntersectionAdapter:
         risk_tolerance: float = 0.0,
         destination: str | None = None,
         switch_ahead: float = 2.0,
+        objects: int = 1,
         **overrides: Any,
     ) -> None:
         self.env = env
@@ -256,8 +263,16 @@ class IntersectionAdapter:
         self.route: RoutePath | None = None
         self.lane = 0
         """Index in :attr:`route` of the lane being followed."""
+        if isinstance(objects, bool) or not isinstance(objects, int) or objects < 1:
+            raise ValueError(f"objects must be an integer >= 1, got {objects!r}")
+        self.objects = objects
+        self.last_objects = np.zeros((0, 5))
+        """Measurements ``(m, 5)`` of the objects planned against at the last step, most conflicting first."""
         self.last_object: np.ndarray | None = None
-        """The chosen object's measurement ``(5,)`` of the last step."""
+        """The measurement ``(5,)`` of the object whose plan was applied at the last step."""
+        self.last_solves: list[Any] = []
+        """The solve reports of the last step, one per object."""
+        self._last_solve: Any = None
         self.last_observation: np.ndarray | None = None
         """The observation ``(15,)`` the agent got at the last step."""
         self._vehicle: Any = None
@@ -279,8 +294,13 @@ class IntersectionAdapter:
 
     @property
     def last_solve(self) -> Any:
-        """The last step's solve report (``agents.SolveReport``), or None."""
-        return getattr(self.agent, "last_solve", None) if self.route is not None else None
+        """The solve report (``agents.SolveReport``) of the plan applied at the last step, or None."""
+        return self._last_solve
+
+    @property
+    def last_solve_time(self) -> float:
+        """Wall time [s] of the agent's solves of the last step, summed over the objects."""
+        return float(sum(getattr(r, "solve_time", 0.0) for r in self.last_solves if r is not None))
 
     @property
     def failures(self) -> int:
@@ -310,18 +330,25 @@ class IntersectionAdapter:
         scenario = self._scenario_for(self.lane)
         others = self._measure_others(rows[1:])
         progress = self.route.progress(self.lane, x, y)
-        self.last_object = self._select_object(others, progress, scenario)
+        self.last_objects = self._select_objects(others, progress, scenario)
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
         wrap = NUMPY.wrap_angle
-        obs = np.array([x, y, wrap(theta), speed, self._omega, *self.last_object, lam, *error], dtype=float)
-        obs[ob.OBJECT_POSE.start + 2] = wrap(obs[ob.OBJECT_POSE.start + 2])
-        self.last_observation = obs.astype(np.float32)
+        batch = np.array(
+            [
+                [x, y, wrap(theta), speed, self._omega, *o[:2], wrap(o[2]), *o[3:], lam, *error]
+                for o in self.last_objects
+            ]
+        ).astype(np.float32)  # (m, 15): one observation per object, the same ego
         agent = self._agent_for(self.lane)
-        start = np.array([self._fresh or switched])
-        action, _ = agent.predict(self.last_observation, episode_start=start, deterministic=True)
+        start = np.full(len(batch), self._fresh or switched)
+        actions, _ = agent.predict(batch, episode_start=start, deterministic=True)
         self._fresh = False
-        v, omega = (float(a) for a in np.asarray(action, dtype=float).reshape(2))
+        reports = list(getattr(agent, "last_solves", None) or [None] * len(batch))
+        chosen = int(np.argmin(actions[:, 0]))  # the most cautious plan: the lowest speed
+        self.last_object, self.last_observation = self.last_objects[chosen], batch[chosen]
+        self._last_solve, self.last_solves = reports[chosen], reports
+        v, omega = (float(a) for a in actions[chosen])
         highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)
         self._omega = omega
         return highway_action, None
@@ -413,6 +440,7 @@ class IntersectionAdapter:
         self._steering = float(action.get("steering", 0.0))
         self._omega = 0.0
         self._fresh = True
+        self._last_solve, self.last_solves = None, []
 
     def _rows(self, observation: np.ndarray) -> np.ndarray:
         """``(V, 4)``: x [m], y [m], heading [rad], signed speed [m/s] of the present rows."""
@@ -471,15 +499,15 @@ class IntersectionAdapter:
         self._tracks = np.column_stack([rows, omega]) if len(rows) else np.zeros((0, 5))
         return self._tracks.copy()
 
-    def _select_object(self, others: np.ndarray, progress: float, scenario: Scenario) -> np.ndarray:
-        """The measurement ``(5,)`` of the vehicle that conflicts first with the ego driving the
-        route at v_ref: the first prediction step n at which the ego's disc could touch the
-        vehicle's truncation box (centre gap <= r_e + r_o + the box's half diagonal), ties and
-        vehicles that never conflict ranked by their closest predicted approach. A far, still
-        stand-in when no vehicle is observed."""
+    def _select_objects(self, others: np.ndarray, progress: float, scenario: Scenario) -> np.ndarray:
+        """Measurements ``(m, 5)``, m <= :attr:`objects`, of the vehicles that conflict first with
+        the ego driving the route at v_ref: ranked by the first prediction step n at which the
+        ego's disc could touch the vehicle's truncation box (centre gap <= r_e + r_o + the box's
+        half diagonal), then (ties, and vehicles that never conflict) by their closest predicted
+        approach. A far, still stand-in when no vehicle is observed."""
         if len(others) == 0:
             x, y = self.route.position(progress)
-            return np.array([x + FAR, y + FAR, 0.0, 0.0, 0.0])
+            return np.array([[x + FAR, y + FAR, 0.0, 0.0, 0.0]])
         n_steps = scenario.horizon + 1
         ego_xy = self.route.position(progress + scenario.ego.v_ref * scenario.dt * np.arange(n_steps))
         beliefs = predict(scenario, others.T)  # N+1 beliefs, fields (K,)
@@ -487,7 +515,7 @@ class IntersectionAdapter:
         reach = np.array([scenario.collision_distance + np.hypot(b.half_x, b.half_y) for b in beliefs])
         conflict = gaps <= reach.reshape(-1, 1)  # (N+1, K)
         first = np.where(conflict.any(axis=0), np.argmax(conflict, axis=0), n_steps)
-        return others[int(np.lexsort((gaps.min(axis=0), first))[0])]
+        return others[np.lexsort((gaps.min(axis=0), first))[: self.objects]]
 
 
 class IDMEgo:
