@@ -198,6 +198,8 @@ def test_adapter_drives_intersection_v1():
     obs, _ = env.reset(seed=1)
     vehicle = env.unwrapped.vehicle
     assert adapter.last_solve is None
+    with pytest.raises(ValueError, match="no route yet"):
+        adapter.scenario  # noqa: B018
     for _ in range(5):
         action, state = adapter.predict(obs)
         assert state is None and action.shape == (2,) and action.dtype == np.float32

@@ -467,6 +467,8 @@ class IntersectionAdapter:
         return switched
 
     def _scenario_for(self, lane: int) -> Scenario:
+        if self.route is None:
+            raise ValueError("no route yet: the adapter reads it at its first predict() of an episode")
         path = self.route.paths[lane]
         base = self.base_scenario
         v_ref = base.ego.v_ref
@@ -477,9 +479,10 @@ class IntersectionAdapter:
         )
 
     def _agent_for(self, lane: int) -> Any:
+        scenario = self._scenario_for(lane)
         path = self.route.paths[lane]
         if path not in self._agents:
-            self._agents[path] = self.make_agent(self._scenario_for(lane))
+            self._agents[path] = self.make_agent(scenario)
         return self._agents[path]
 
     def _measure_others(self, rows: np.ndarray) -> np.ndarray:
