@@ -31,6 +31,8 @@ ENV_ID = "RiskCrossing-v0"
 OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
 """How the object moves: ``"paper"`` (deterministic unicycle) or ``"sampled"`` (one draw per step
 from the prediction model)."""
+RENDERERS: tuple[str, ...] = ("auto", "highway", "basic")
+"""Who draws: highway-env's graphics, the basic pygame view, or ``"auto"`` (highway-env's if installed)."""
 ACTION_TOLERANCE = 1e-6
 """Actions may exceed the Box by this much [m/s, rad/s] (float32 rounding); they are applied as given."""
 
@@ -144,7 +146,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Arguments
 
     ``gym.make("RiskCrossing-v0", uncertainty="low", risk_tolerance=0.0, risk_estimator="exact",
-    object_motion="paper", reward_risk_weight=0.0, render_mode=None, **overrides)``
+    object_motion="paper", reward_risk_weight=0.0, render_mode=None, renderer="auto", **overrides)``
 
     - ``uncertainty``: the paper's Table I preset, ``"low"`` (default), ``"medium"`` or ``"high"``;
     - ``risk_tolerance``: epsilon [J for the paper's severity]; ``info["risk_violation"]`` is
@@ -157,6 +159,9 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
       ``variations``: the ranges, a :class:`risk_env.Variations`;
     - ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"`` (pygame; see
       :mod:`risk_env.rendering`);
+    - ``renderer``: ``"auto"`` (default: ``"highway"`` when highway-env is installed, else
+      ``"basic"``), ``"highway"`` (highway-env's road and vehicle graphics with our overlays,
+      :mod:`risk_env.highway.graphics`; needs ``pip install 'riskcrossing[render]'``) or ``"basic"``;
     - ``**overrides``: flat scenario parameters, :data:`risk_env.scenario.OVERRIDES`, e.g.
       ``object_speed=2.5, v_ref=3.0, severity="plastic", max_steps=60``;
     - ``scenario``: a whole :class:`~risk_env.scenario.Scenario` instead of ``uncertainty``,
@@ -210,6 +215,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         scenario: Scenario | None = None,
         randomize: bool = False,
         variations: Variations | None = None,
+        renderer: str = "auto",
         **overrides: Any,
     ) -> None:
         self.base_scenario: Scenario = _build_scenario(uncertainty, risk_tolerance, scenario, overrides)
@@ -235,6 +241,9 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if render_mode is not None and render_mode not in modes:
             raise ValueError(f"unknown render_mode {render_mode!r}; expected None or one of {modes}")
         self.render_mode = render_mode
+        if renderer not in RENDERERS:
+            raise ValueError(f"unknown renderer {renderer!r}; expected one of {RENDERERS}")
+        self.renderer = renderer
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.scenario.dt}
 
         ego = self.scenario.ego
@@ -342,9 +351,12 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             return None
         self._require_reset()
         if self._renderer is None:
-            from risk_env.rendering import Renderer
+            from risk_env.rendering import make_renderer
 
-            self._renderer = Renderer(self.scenario, self.render_mode, fps=self.metadata["render_fps"])
+            fps = self.metadata["render_fps"]
+            self._renderer = make_renderer(
+                self.renderer, self.scenario, self.render_mode, fps, self.estimator.name
+            )
         ego_x, ego_y, _ = self._ego_pose
         lam = float(project(self.scenario.path, ego_x, ego_y))
         return self._renderer.render(

@@ -1,4 +1,5 @@
-"""The only module that draws: a top view of ``RiskCrossing-v0`` with pygame (pygame-ce).
+"""The basic top view of ``RiskCrossing-v0`` with pygame (pygame-ce), and the env's choice of renderer
+(:func:`make_renderer`; highway-env's graphics live in :mod:`risk_env.highway.graphics`).
 
 Drawn: the reference path (solid up to the goal, thin beyond it), the goal, the object's
 predicted truncation boxes and means over the horizon (:func:`risk_env.predict` from its current
@@ -11,6 +12,7 @@ window and needs a display.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 from collections.abc import Sequence
@@ -165,6 +167,21 @@ class Renderer:
         if self._screen is not None:
             pygame.display.quit()
             self._screen = None
+
+
+def make_renderer(kind: str, scenario: Scenario, mode: str, fps: float, estimator: str = "exact") -> Renderer:
+    """The env's renderer: ``kind`` is ``"basic"`` (:class:`Renderer`), ``"highway"``
+    (:class:`risk_env.highway.graphics.HighwayRenderer`, needs highway-env) or ``"auto"`` (highway
+    when highway-env can be imported); ``estimator`` names the env's risk estimator."""
+    if kind == "auto":
+        kind = "highway" if importlib.util.find_spec("highway_env") is not None else "basic"
+    if kind == "highway":
+        from risk_env.highway.graphics import HighwayRenderer  # an ImportError says how to install
+
+        return HighwayRenderer(scenario, mode, fps, estimator=estimator)
+    if kind == "basic":
+        return Renderer(scenario, mode, fps)
+    raise ValueError(f"unknown renderer {kind!r}; expected 'auto', 'highway' or 'basic'")
 
 
 def _blend(a: tuple[int, int, int], b: tuple[int, int, int], t: float) -> tuple[int, int, int]:

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def rgb_env(**kwargs):
-    return gym.make(ENV_ID, render_mode="rgb_array", **kwargs)
+    return gym.make(ENV_ID, render_mode="rgb_array", renderer="basic", **kwargs)
 
 
 def has_colour(frame: np.ndarray, colour: tuple[int, int, int]) -> bool:

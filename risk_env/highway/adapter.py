@@ -1,0 +1,569 @@
+"""Our MPC agents drive highway-env's controlled vehicle on ``intersection-v1``.
+
+:class:`IntersectionAdapter` sits between highway-env and an agent that speaks RiskCrossing
+(``action, _ = agent.predict(obs_15)``, :mod:`risk_env.observation`): it turns highway-env's
+``Kinematics`` observation into ours and our ``(v, omega)`` into highway-env's continuous
+``(acceleration, steering)``, and offers the same ``predict`` itself, so anything that drives a
+highway-env env with an SB3-style policy drives it.
+
+**The reference path.** The MPC core follows one constant-curvature arc, a
+:class:`~risk_env.scenario.ReferencePath` (:mod:`agents.mpc` builds its problem from it). The
+controlled vehicle's route is a chain of highway-env lanes, each straight (curvature 0) or circular
+(curvature 1/radius), so each lane *is* such an arc, exactly (:class:`RoutePath`). The adapter keeps
+one agent per lane of the route, built on the scenario re-posed on that lane (same numbers,
+``goal``/``curvature``/``lambda_start`` of the lane), and hands over to the next lane's agent when
+the vehicle's closest point passes the end of its lane (``switch_ahead`` metres earlier if asked).
+The approximation: within a horizon that runs past the end of a lane, the MPC's reference continues
+that lane's arc (straight on, or round the circle) rather than turning into the next lane; the
+plan bends at the hand-over, one step late. The new agent starts cold (no warm start).
+
+**The object.** Our agents plan against one object. Among the observed vehicles, the adapter takes
+the one that conflicts first with the ego driving the route at ``v_ref`` (the first prediction step
+at which its truncation box could reach the ego's disc; ties by the closest predicted approach):
+usually the nearest vehicle crossing the route. The others are not avoided (``objects=k`` plans
+against the k first and applies the slowest plan, a heuristic). Its measurement is observed position,
+heading and speed; its turn rate is the change of its heading since the previous step, when the
+vehicle can be associated with one seen then (within :data:`TRACK_GATE` of where it was predicted),
+else 0. highway-env's observation has no steering, so the heading stands in for the direction of
+travel (they differ by the slip angle, up to ~0.2 rad in a tight turn).
+
+**The ego** is measured with its direction of travel (heading plus the slip angle of the steering the
+adapter applied) and speed; its last input is that speed with the turn rate last asked for. The
+action: acceleration ``(v - v_now) / T`` so that the speed reaches v at the end of the step (the
+unicycle jumps to v at once, so highway-env's vehicle lags ``(v - v_now) T / 2`` metres behind the
+plan per step), and the steering whose kinematic-bicycle turn rate at the step's mean speed is
+omega. It needs highway-env's kinematic vehicle (``"dynamical": False``) and an unnormalised,
+absolute ``Kinematics`` observation with x, y, vx, vy and heading: :data:`INTERSECTION_CONFIG`
+(:func:`make_intersection_env`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from risk_env.dynamics import unicycle_step
+from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
+from risk_env.ops import NUMPY
+from risk_env.path import path_error_vector, point, project
+from risk_env.prediction import predict
+from risk_env.scenario import Pose, ReferencePath, Scenario
+
+LaneIndex = tuple[str, str, int]
+
+INTERSECTION_CONFIG: dict[str, Any] = {
+    "action": {
+        "type": "ContinuousAction",
+        "longitudinal": True,
+        "lateral": True,
+        "dynamical": False,
+        "steering_range": [-math.pi / 3, math.pi / 3],
+    },
+    "observation": {
+        "type": "Kinematics",
+        "vehicles_count": 15,
+        "features": ["presence", "x", "y", "vx", "vy", "heading"],
+        "absolute": True,
+        "normalize": False,
+        "see_behind": True,
+        "order": "sorted",
+    },
+    "policy_frequency": 2,
+    "simulation_frequency": 16,
+}
+"""``intersection-v1`` as the adapter needs it: the kinematic vehicle (highway-env's own default for
+``intersection-v1`` is its dynamic bicycle), an unnormalised absolute observation with headings,
+and a step of T = 0.5 s (the paper's sample time: 8 frames at 16 Hz). Everything else, including
+the traffic, the destination ``"o1"`` (a left turn) and the 13 s duration, is highway-env's."""
+
+ADAPTER_DEFAULTS: dict[str, Any] = {
+    "v_ref": 8.0,
+    "v_min": 0.0,
+    "v_max": 10.0,
+    "ego_radius": 2.0,
+    "object_radius": 2.0,
+}
+"""Scenario values the adapter changes from the paper's for the intersection: v_ref 8 m/s (the
+lanes' limit and the ego's entry speed are 10), no reversing on a road, v_max 10 m/s, discs of
+2 m (highway-env's 5 x 2 m cars touch at centre distances of 2 to 5.4 m; two 2 m discs at 4 m)."""
+
+TRACK_GATE = 2.0
+"""Largest distance [m] between a vehicle and where one seen a step earlier was predicted to be,
+for the two to count as the same vehicle (turn-rate estimate)."""
+CURVE_SPEED_SHARE = 0.9
+"""On a circular lane v_ref is capped to this share of ``omega_max * radius``, so the lane stays
+followable (:class:`~risk_env.Scenario` requires ``curvature * v_ref <= omega_max``)."""
+MIN_TURN_SPEED = 0.5
+"""Below this mean speed [m/s] the steering for a turn rate is computed as at this speed."""
+FAR = 1e3
+"""Offset [m] of the stand-in object when no other vehicle is observed (no risk anywhere near)."""
+
+
+def make_intersection_env(render_mode: str | None = None, **config: Any) -> gym.Env:
+    """``gym.make("intersection-v1")`` with :data:`INTERSECTION_CONFIG`, updated by ``config``."""
+    from risk_env.highway.common import require_highway_env
+
+    require_highway_env()
+    merged = {**INTERSECTION_CONFIG, **config}
+    with warnings.catch_warnings():  # gymnasium: "intersection-v1 is out of date" (we want v1)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return gym.make("intersection-v1", render_mode=render_mode, config=merged)
+
+
+def lane_path(lane: Any) -> ReferencePath:
+    """The highway-env lane as our arc: goal = the lane's end (position and heading), curvature 0
+    (``StraightLane``) or ``direction / radius`` (``CircularLane``), ``lambda_start = -length``."""
+    from highway_env.road.lane import CircularLane, SineLane, StraightLane
+
+    if isinstance(lane, CircularLane):
+        curvature = lane.direction / lane.radius
+    elif isinstance(lane, StraightLane) and not isinstance(lane, SineLane):
+        curvature = 0.0
+    else:
+        raise ValueError(
+            f"the adapter follows straight and circular lanes only (our path is one arc per lane);"
+            f" got a {type(lane).__name__}"
+        )
+    end = lane.position(lane.length, 0.0)
+    return ReferencePath(
+        goal=Pose(float(end[0]), float(end[1]), float(lane.heading_at(lane.length))),
+        curvature=float(curvature),
+        lambda_start=-float(lane.length),
+    )
+
+
+@dataclass(frozen=True)
+class RoutePath:
+    """A route of highway-env lanes as a chain of our reference arcs, one per lane.
+
+    Route arc length s [m] runs from the start of the first lane; beyond the last lane the last
+    arc continues.
+    """
+
+    lanes: tuple[LaneIndex, ...]
+    """highway-env lane indices ``(from, to, id)``, in driving order."""
+    paths: tuple[ReferencePath, ...]
+    """The lanes as arcs (same order), each ending at its lane's end with lambda_g = 0."""
+
+    def __post_init__(self) -> None:
+        if not self.paths or len(self.paths) != len(self.lanes):
+            raise ValueError(
+                f"a route needs one path per lane, got {len(self.lanes)} lanes, {len(self.paths)} paths"
+            )
+
+    @classmethod
+    def from_lanes(cls, network: Any, lanes: Sequence[LaneIndex]) -> RoutePath:
+        """The route through ``lanes`` of a highway-env ``RoadNetwork``."""
+        lanes = tuple(tuple(index) for index in lanes)
+        return cls(lanes=lanes, paths=tuple(lane_path(network.get_lane(index)) for index in lanes))
+
+    @classmethod
+    def of_vehicle(cls, network: Any, vehicle: Any, destination: str) -> RoutePath:
+        """From ``vehicle``'s lane to the node ``destination`` (shortest path in the network)."""
+        current = tuple(vehicle.lane_index)
+        nodes = network.shortest_path(current[1], destination)
+        if current[1] != destination and not nodes:
+            raise ValueError(f"no route from lane {current} to {destination!r}")
+        lanes = [current]
+        for start, end in zip(nodes[:-1], nodes[1:], strict=True):
+            lanes.append((start, end, min(current[2], len(network.graph[start][end]) - 1)))
+        return cls.from_lanes(network, lanes)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """Lane lengths ``(L,)`` [m]."""
+        return np.array([-p.lambda_start for p in self.paths])
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Route arc length at the start of each lane ``(L,)`` [m]."""
+        return np.concatenate([[0.0], np.cumsum(self.lengths)[:-1]])
+
+    def position(self, s: np.ndarray | float) -> np.ndarray:
+        """Points ``(..., 2)`` [m] at route arc lengths ``s`` [m]."""
+        s = np.asarray(s, dtype=float)
+        lane = np.clip(np.searchsorted(self.offsets, s, side="right") - 1, 0, len(self.paths) - 1)
+        out = np.empty(s.shape + (2,))
+        for i, path in enumerate(self.paths):
+            mask = lane == i
+            if np.any(mask):
+                lam = s[mask] - self.offsets[i] + path.lambda_start
+                px, py, _ = point(path, lam)
+                out[mask] = np.stack([px, py], axis=-1)
+        return out
+
+    def progress(self, lane: int, x: float, y: float) -> float:
+        """Route arc length [m] of the closest point to ``(x, y)`` on lane ``lane``'s arc."""
+        path = self.paths[lane]
+        return float(self.offsets[lane] + project(path, x, y) - path.lambda_start)
+
+    def polyline(self, spacing: float = 1.0) -> np.ndarray:
+        """The whole route sampled every ``spacing`` metres ``(M, 2)`` [m]."""
+        total = float(np.sum(self.lengths))
+        return self.position(np.linspace(0.0, total, max(int(total / spacing), 1) + 1))
+
+
+class IntersectionAdapter:
+    """Lets an agent of ours drive highway-env's controlled vehicle (see the module docstring).
+
+    ``action, _ = adapter.predict(highway_obs)`` returns highway-env's normalised
+    ``(acceleration, steering)`` in [-1, 1]^2. A new episode is detected from ``episode_start``
+    or from a new controlled vehicle; its route is read then from the env's road network (the map:
+    the agents themselves read only observations).
+
+    Args:
+        env: a highway-env env configured as :data:`INTERSECTION_CONFIG` (or compatibly).
+        make_agent: builds an agent for a scenario, e.g. ``agents.RMPC`` or
+            ``functools.partial(agents.SMPC, risk="exact")``; called once per lane geometry.
+        uncertainty, risk_tolerance, **overrides: the scenario,
+            :func:`risk_env.highway.highway_scenario` with :data:`ADAPTER_DEFAULTS` first.
+        destination: the node the route leads to (default: the env's ``config["destination"]``).
+        switch_ahead: hand over to the next lane this many metres [m] before the end of a lane
+            (2 m: about half a step at v_ref, so the hand-over comes the step before the lane ends).
+        objects: plan against this many of the most conflicting vehicles, one solve each (the
+            agent's batch ``predict``, a warm start per slot), and apply the plan whose first speed
+            is the lowest. 1 (default): the design above, one object. More is the adapter's
+            heuristic, not the paper's method: each plan respects one object's risk bound, and the
+            slowest is not guaranteed to respect the others'.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        make_agent: Callable[[Scenario], Any],
+        uncertainty: str = "low",
+        risk_tolerance: float = 0.0,
+        destination: str | None = None,
+        switch_ahead: float = 2.0,
+        objects: int = 1,
+        **overrides: Any,
+    ) -> None:
+        self.env = env
+        base = unwrapped_highway(env)
+        self._check_config(base)
+        self.dt = policy_period(env)
+        self.base_scenario = highway_scenario(
+            env, uncertainty, risk_tolerance, **{**ADAPTER_DEFAULTS, **overrides}
+        )
+        """The scenario before re-posing on a lane (its path is the paper's, unused)."""
+        self.destination = destination or base.config.get("destination")
+        if not self.destination:
+            raise ValueError("no destination: pass destination= or set the env's config['destination']")
+        if not (math.isfinite(switch_ahead) and switch_ahead >= 0):
+            raise ValueError(f"switch_ahead must be >= 0 [m], got {switch_ahead!r}")
+        self.switch_ahead = float(switch_ahead)
+        self.make_agent = make_agent
+        self._agents: dict[ReferencePath, Any] = {}
+        self.route: RoutePath | None = None
+        self.lane = 0
+        """Index in :attr:`route` of the lane being followed."""
+        if isinstance(objects, bool) or not isinstance(objects, int) or objects < 1:
+            raise ValueError(f"objects must be an integer >= 1, got {objects!r}")
+        self.objects = objects
+        self.last_objects = np.zeros((0, 5))
+        """Measurements ``(m, 5)`` of the objects planned against at the last step, most conflicting first."""
+        self.last_object: np.ndarray | None = None
+        """The measurement ``(5,)`` of the object whose plan was applied at the last step."""
+        self.last_solves: list[Any] = []
+        """The solve reports of the last step, one per object."""
+        self._last_solve: Any = None
+        self.last_observation: np.ndarray | None = None
+        """The observation ``(15,)`` the agent got at the last step."""
+        self._vehicle: Any = None
+        self._tracks = np.zeros((0, 5))
+        self._steering = 0.0
+        self._omega = 0.0
+        self._fresh = True
+
+    # ---------------------------------------------------------------- public API
+    @property
+    def scenario(self) -> Scenario:
+        """The scenario of the lane being followed."""
+        return self._scenario_for(self.lane)
+
+    @property
+    def agent(self) -> Any:
+        """The agent of the lane being followed."""
+        return self._agent_for(self.lane)
+
+    @property
+    def last_solve(self) -> Any:
+        """The solve report (``agents.SolveReport``) of the plan applied at the last step, or None."""
+        return self._last_solve
+
+    @property
+    def last_solve_time(self) -> float:
+        """Wall time [s] of the agent's solves of the last step, summed over the objects."""
+        return float(sum(getattr(r, "solve_time", 0.0) for r in self.last_solves if r is not None))
+
+    @property
+    def failures(self) -> int:
+        """Failed solves this episode, over every lane's agent."""
+        return sum(getattr(a, "failures", 0) for a in self._agents.values())
+
+    def reset(self) -> None:
+        """Forget the episode: the next ``predict`` reads the route anew."""
+        self._vehicle = None
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, None]:
+        """highway-env observation ``(V, F)`` -> its action ``(2,)`` float32 (see the class)."""
+        base = unwrapped_highway(self.env)
+        if self._vehicle is not base.vehicle or (episode_start is not None and np.any(episode_start)):
+            self._begin_episode(base)
+        rows = self._rows(observation)
+        ego = rows[0]
+        x, y, heading, speed = ego
+        theta = heading + slip_angle(self._steering)
+        switched = self._advance(x, y)
+        scenario = self._scenario_for(self.lane)
+        others = self._measure_others(rows[1:])
+        progress = self.route.progress(self.lane, x, y)
+        self.last_objects = self._select_objects(others, progress, scenario)
+        pose = np.array([x, y, theta])
+        error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
+        wrap = NUMPY.wrap_angle
+        batch = np.array(
+            [
+                [x, y, wrap(theta), speed, self._omega, *o[:2], wrap(o[2]), *o[3:], lam, *error]
+                for o in self.last_objects
+            ]
+        ).astype(np.float32)  # (m, 15): one observation per object, the same ego
+        agent = self._agent_for(self.lane)
+        start = np.full(len(batch), self._fresh or switched)
+        actions, _ = agent.predict(batch, episode_start=start, deterministic=True)
+        self._fresh = False
+        reports = list(getattr(agent, "last_solves", None) or [None] * len(batch))
+        chosen = int(np.argmin(actions[:, 0]))  # the most cautious plan: the lowest speed
+        self.last_object, self.last_observation = self.last_objects[chosen], batch[chosen]
+        self._last_solve, self.last_solves = reports[chosen], reports
+        v, omega = (float(a) for a in actions[chosen])
+        highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)
+        self._omega = omega
+        return highway_action, None
+
+    def highway_action(
+        self, v: float, omega: float, speed: float, steering: float
+    ) -> tuple[np.ndarray, float]:
+        """Our ``(v [m/s], omega [rad/s])``, from the current ``speed`` [m/s] and ``steering``
+        [rad], as highway-env's normalised action ``(2,)`` float32, and the steering angle [rad]
+        it applies (see the module docstring)."""
+        base = unwrapped_highway(self.env)
+        action_type = base.action_type
+        half_length = 0.5 * float(base.vehicle.LENGTH)
+        accel = (v - speed) / self.dt
+        mean = 0.5 * (v + speed)
+        if abs(mean) < MIN_TURN_SPEED:
+            mean = math.copysign(MIN_TURN_SPEED, mean if mean != 0 else 1.0)
+        lo, hi = action_type.steering_range
+        beta = self._slip_for(omega, mean, half_length, slip_angle(steering), slip_angle(hi))
+        steering = float(np.clip(math.atan(2.0 * math.tan(beta)), lo, hi))
+        a_lo, a_hi = action_type.acceleration_range
+        normalised = np.array(
+            [2.0 * (accel - a_lo) / (a_hi - a_lo) - 1.0, 2.0 * (steering - lo) / (hi - lo) - 1.0]
+        )
+        return np.clip(normalised, -1.0, 1.0).astype(np.float32), steering
+
+    # ---------------------------------------------------------------- internals
+    def _slip_for(
+        self, omega: float, mean_speed: float, half_length: float, beta_now: float, beta_max: float
+    ) -> float:
+        """The slip angle beta [rad] whose step ends at the heading the unicycle predicts.
+
+        Changing the steering turns the direction of travel at once by ``beta - beta_now``; then
+        it turns at ``mean_speed sin(beta) / (length/2)`` for T. Solve
+        ``beta - beta_now + T mean_speed sin(beta) / (length/2) = omega T`` (Newton from the
+        small-angle solution), so the course at the end of the step is the model's (the chord's
+        direction then differs by ``(beta - beta_now) / 2``, instead of the whole jump).
+        """
+        gain = mean_speed / half_length
+        dt = self.dt
+
+        def residual(b: float) -> float:
+            return (b - beta_now) / dt + gain * math.sin(b) - omega
+
+        slope0 = 1.0 / dt + gain
+        beta = (omega + beta_now / dt) / slope0 if slope0 > 0 else 0.0
+        for _ in range(4):
+            slope = 1.0 / dt + gain * math.cos(beta)
+            if slope <= 0:  # fast reversing: no monotone solution; the small-angle one stands
+                break
+            beta -= residual(beta) / slope
+        return float(np.clip(beta, -beta_max, beta_max))
+
+    @staticmethod
+    def _check_config(base: Any) -> None:
+        from highway_env.envs.common.action import ContinuousAction
+        from highway_env.envs.common.observation import KinematicObservation
+
+        hint = "build the env with risk_env.highway.make_intersection_env() (INTERSECTION_CONFIG)"
+        action = base.action_type
+        if type(action) is not ContinuousAction or not (action.longitudinal and action.lateral):
+            raise ValueError(
+                f"the adapter needs highway-env's ContinuousAction with throttle and steering, got"
+                f" {type(action).__name__}; {hint}"
+            )
+        if action.dynamical:
+            raise ValueError(f"the adapter needs the kinematic vehicle ('dynamical': False); {hint}")
+        obs = base.observation_type
+        needed = {"presence", "x", "y", "vx", "vy", "heading"}
+        if not isinstance(obs, KinematicObservation) or not needed <= set(obs.features):
+            raise ValueError(
+                f"the adapter needs a Kinematics observation with features {sorted(needed)}; {hint}"
+            )
+        if not obs.absolute or obs.normalize:
+            raise ValueError(f"the adapter needs absolute, unnormalised Kinematics observations; {hint}")
+
+    def _begin_episode(self, base: Any) -> None:
+        vehicle = base.vehicle
+        if vehicle is None:
+            raise ValueError("the env has no controlled vehicle: call env.reset() first")
+        self._vehicle = vehicle
+        self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
+        self.lane = 0
+        for agent in self._agents.values():
+            if hasattr(agent, "reset"):
+                agent.reset()
+        self._tracks = np.zeros((0, 5))
+        action = getattr(vehicle, "action", {}) or {}
+        self._steering = float(action.get("steering", 0.0))
+        self._omega = 0.0
+        self._fresh = True
+        self._last_solve, self.last_solves = None, []
+
+    def _rows(self, observation: np.ndarray) -> np.ndarray:
+        """``(V, 4)``: x [m], y [m], heading [rad], signed speed [m/s] of the present rows."""
+        obs = np.asarray(observation, dtype=float)
+        features = list(unwrapped_highway(self.env).observation_type.features)
+        if obs.ndim != 2 or obs.shape[1] != len(features):
+            raise ValueError(f"expected a Kinematics observation (V, {len(features)}), got shape {obs.shape}")
+        col = {name: obs[:, features.index(name)] for name in ("presence", "x", "y", "vx", "vy", "heading")}
+        present = col["presence"] > 0.5
+        present[0] = True  # the observer itself
+        h = col["heading"]
+        speed = col["vx"] * np.cos(h) + col["vy"] * np.sin(h)
+        return np.column_stack([col["x"], col["y"], h, speed])[present]
+
+    def _advance(self, x: float, y: float) -> bool:
+        """Hand over to the next lane when the current one ends; whether it did."""
+        switched = False
+        while self.lane < len(self.route.paths) - 1:
+            path = self.route.paths[self.lane]
+            if float(project(path, x, y)) < path.lambda_goal - self.switch_ahead:
+                break
+            self.lane += 1
+            switched = True
+        return switched
+
+    def _scenario_for(self, lane: int) -> Scenario:
+        if self.route is None:
+            raise ValueError("no route yet: the adapter reads it at its first predict() of an episode")
+        path = self.route.paths[lane]
+        base = self.base_scenario
+        v_ref = base.ego.v_ref
+        if path.curvature != 0.0:
+            v_ref = min(v_ref, CURVE_SPEED_SHARE * base.ego.omega_max / abs(path.curvature))
+        return base.replace(
+            goal=path.goal, curvature=path.curvature, lambda_start=path.lambda_start, v_ref=v_ref
+        )
+
+    def _agent_for(self, lane: int) -> Any:
+        scenario = self._scenario_for(lane)
+        path = self.route.paths[lane]
+        if path not in self._agents:
+            self._agents[path] = self.make_agent(scenario)
+        return self._agents[path]
+
+    def _measure_others(self, rows: np.ndarray) -> np.ndarray:
+        """Measurements ``(K, 5)`` of the other vehicles; the turn rate from the heading change of
+        an associated vehicle of the previous step (else 0)."""
+        omega = np.zeros(len(rows))
+        prev = self._tracks
+        if len(rows) and len(prev):
+            px, py, _ = unicycle_step(
+                prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3], prev[:, 4], self.dt, NUMPY
+            )
+            gap = np.hypot(rows[:, 0, None] - px[None, :], rows[:, 1, None] - py[None, :])
+            nearest = np.argmin(gap, axis=1)
+            matched = gap[np.arange(len(rows)), nearest] < TRACK_GATE
+            turn = NUMPY.wrap_angle(rows[:, 2] - prev[nearest, 2]) / self.dt
+            omega = np.where(matched, turn, 0.0)
+        self._tracks = np.column_stack([rows, omega]) if len(rows) else np.zeros((0, 5))
+        return self._tracks.copy()
+
+    def _select_objects(self, others: np.ndarray, progress: float, scenario: Scenario) -> np.ndarray:
+        """Measurements ``(m, 5)``, m <= :attr:`objects`, of the vehicles that conflict first with
+        the ego driving the route at v_ref: ranked by the first prediction step n at which the
+        ego's disc could touch the vehicle's truncation box (centre gap <= r_e + r_o + the box's
+        half diagonal), then (ties, and vehicles that never conflict) by their closest predicted
+        approach. A far, still stand-in when no vehicle is observed."""
+        if len(others) == 0:
+            x, y = self.route.position(progress)
+            return np.array([[x + FAR, y + FAR, 0.0, 0.0, 0.0]])
+        n_steps = scenario.horizon + 1
+        ego_xy = self.route.position(progress + scenario.ego.v_ref * scenario.dt * np.arange(n_steps))
+        beliefs = predict(scenario, others.T)  # N+1 beliefs, fields (K,)
+        gaps = np.array([np.hypot(b.x - ego_xy[n, 0], b.y - ego_xy[n, 1]) for n, b in enumerate(beliefs)])
+        reach = np.array([scenario.collision_distance + np.hypot(b.half_x, b.half_y) for b in beliefs])
+        conflict = gaps <= reach.reshape(-1, 1)  # (N+1, K)
+        first = np.where(conflict.any(axis=0), np.argmax(conflict, axis=0), n_steps)
+        return others[np.lexsort((gaps.min(axis=0), first))[: self.objects]]
+
+
+class IDMEgo:
+    """highway-env's own driver as a reference: at the start of each episode the controlled vehicle
+    is replaced by the env's ``other_vehicles_type`` (``IDMVehicle``) at the same state, routed to
+    ``destination``; it then drives itself (IDM speed, lane keeping, the intersection's yielding
+    rules), whatever action is passed. ``predict`` returns a zero action."""
+
+    def __init__(self, env: gym.Env, destination: str | None = None) -> None:
+        self.env = env
+        base = unwrapped_highway(env)
+        self.destination = destination or base.config.get("destination")
+        if not self.destination:
+            raise ValueError("no destination: pass destination= or set the env's config['destination']")
+        self._vehicle: Any = None
+        self.last_solve = None
+
+    def reset(self) -> None:
+        self._vehicle = None
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[np.ndarray, None]:
+        base = unwrapped_highway(self.env)
+        if base.vehicle is not self._vehicle:
+            self._take_over(base)
+        return np.zeros(self.env.action_space.shape, dtype=np.float32), None
+
+    def _take_over(self, base: Any) -> None:
+        from highway_env import utils
+
+        old = base.vehicle
+        cls = utils.class_from_path(base.config["other_vehicles_type"])
+        idm = cls(base.road, old.position.copy(), heading=old.heading, speed=old.speed)
+        idm.plan_route_to(self.destination)
+        base.road.vehicles[base.road.vehicles.index(old)] = idm
+        base.controlled_vehicles[base.controlled_vehicles.index(old)] = idm
+        self._vehicle = idm
+
+
+def reached(env: gym.Env, destination: str) -> bool:
+    """Whether the controlled vehicle has arrived on the road to ``destination``: highway-env's
+    ``has_arrived`` (25 m into an exit lane) on that destination's exit (``has_arrived`` alone
+    accepts any exit)."""
+    base = unwrapped_highway(env)
+    vehicle = base.vehicle
+    arrived = base.has_arrived(vehicle) if hasattr(base, "has_arrived") else True
+    return bool(arrived and vehicle.lane_index[1] == destination)

@@ -1,0 +1,108 @@
+"""What the wrapper, the adapter and the graphics share: highway-env's import, its step length, a
+vehicle as our unicycle measurement, and the scenario that carries our numbers into its world.
+
+Frames: we use highway-env's world coordinates as they are, ``(c1, c2) = (x, y)`` [m] and headings
+[rad] from the x axis toward y. highway-env moves its vehicles with ``dx/dt = v (cos, sin)(heading +
+beta)``, the same equations as our unicycle, so every formula of :mod:`risk_env` holds there
+unchanged (highway-env's screen shows y downward: a mirror image, nothing more).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from risk_env.scenario import Scenario
+
+SPEED_BOUND = 40.0
+"""Speed truncation [m/s] of the object's prediction in highway-env worlds, ``(-40, 40)``: the
+paper's ``(-5, 5)`` would not contain highway speeds. 40 m/s is highway-env's ``Vehicle.MAX_SPEED``."""
+
+INSTALL_HINT = "pip install 'riskcrossing[render]'"
+
+
+def require_highway_env() -> ModuleType:
+    """``import highway_env``, or an ImportError that says how to install it."""
+    try:
+        return importlib.import_module("highway_env")
+    except ImportError as exc:
+        raise ImportError(
+            f"risk_env.highway needs highway-env (with pygame-ce): {INSTALL_HINT}. The rest of"
+            f" risk_env works without it. ({exc})"
+        ) from exc
+
+
+def unwrapped_highway(env: Any) -> Any:
+    """The highway-env ``AbstractEnv`` under ``env``'s wrappers; a clear error for anything else."""
+    base = getattr(env, "unwrapped", env)
+    missing = [name for name in ("controlled_vehicles", "road", "config") if not hasattr(base, name)]
+    if missing:
+        raise TypeError(
+            f"expected a highway-env environment (with controlled_vehicles, road and config), got"
+            f" {type(base).__name__} without {', '.join(missing)}"
+        )
+    return base
+
+
+def policy_period(env: Any) -> float:
+    """Duration [s] of one ``env.step``: ``simulation_frequency // policy_frequency`` frames of
+    ``1 / simulation_frequency`` s each (1 s for highway-env's defaults)."""
+    config = unwrapped_highway(env).config
+    frames = int(config["simulation_frequency"] // config["policy_frequency"])
+    if frames < 1:
+        raise ValueError(
+            f"policy_frequency {config['policy_frequency']} Hz exceeds simulation_frequency"
+            f" {config['simulation_frequency']} Hz"
+        )
+    return frames / config["simulation_frequency"]
+
+
+def slip_angle(steering: float) -> float:
+    """beta [rad] of highway-env's kinematic bicycle: the angle between heading and velocity for a
+    front steering angle ``steering`` [rad]: ``atan(tan(steering) / 2)``."""
+    return math.atan(0.5 * math.tan(steering))
+
+
+def vehicle_measurement(vehicle: Any) -> np.ndarray:
+    """A highway-env vehicle as our unicycle measurement ``(c1 [m], c2 [m], theta [rad], v [m/s],
+    omega [rad/s])``, ``(5,)`` float64.
+
+    theta is the direction of travel (heading plus slip angle) and omega its rate, so that our
+    unicycle with these inputs moves the vehicle's centre exactly as highway-env does while the
+    vehicle keeps its speed and steering: for the kinematic ``Vehicle`` (and the IDM/MDP vehicles
+    built on it) ``beta = atan(tan(steering) / 2)``, ``omega = v sin(beta) / (length / 2)``; for the
+    dynamic ``BicycleVehicle`` the slip comes from its lateral speed and omega is its yaw rate.
+    """
+    x, y = (float(c) for c in vehicle.position)
+    heading, speed = float(vehicle.heading), float(vehicle.speed)
+    if hasattr(vehicle, "lateral_speed") and hasattr(vehicle, "yaw_rate"):  # BicycleVehicle
+        lateral = float(vehicle.lateral_speed)
+        # theta stays within pi/2 of the heading; a reversing vehicle keeps a negative speed
+        beta = math.atan(lateral / speed) if abs(speed) > 1e-9 else 0.0
+        ground = math.copysign(math.hypot(speed, lateral), speed)
+        return np.array([x, y, heading + beta, ground, float(vehicle.yaw_rate)])
+    action = getattr(vehicle, "action", None) or {}
+    steering = 0.0 if getattr(vehicle, "crashed", False) else float(action.get("steering", 0.0))
+    beta = slip_angle(steering)
+    omega = speed * math.sin(beta) / (0.5 * float(vehicle.LENGTH))
+    return np.array([x, y, heading + beta, speed, omega])
+
+
+def highway_scenario(
+    env: Any, uncertainty: str = "low", risk_tolerance: float = 0.0, **overrides: Any
+) -> Scenario:
+    """The paper's scenario at an uncertainty preset, carried into ``env``'s world.
+
+    Set from the env: ``dt`` = :func:`policy_period` (the prediction steps are env steps, so a
+    preset's growth per step is growth per env step). Changed from the paper:
+    ``velocity_bounds0 = (-SPEED_BOUND, SPEED_BOUND)``. Everything else is the paper's unless
+    overridden by flat name (:data:`risk_env.scenario.OVERRIDES`), e.g. ``ego_radius=2.0``,
+    ``severity="plastic"``. Positions and the path in the scenario are not used by the wrapper.
+    """
+    values: dict[str, Any] = {"dt": policy_period(env), "velocity_bounds0": (-SPEED_BOUND, SPEED_BOUND)}
+    values.update(overrides)
+    return Scenario.preset(uncertainty, risk_tolerance=risk_tolerance, **values)
