@@ -47,6 +47,13 @@ def _ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
     return ego[0], ego[1], ego[2], ego[3]
 
 
+def _shape(a: Any) -> tuple[int, ...]:
+    """``np.shape(a)``, without its array conversion for floats and arrays."""
+    if isinstance(a, float):
+        return ()
+    return a.shape if isinstance(a, np.ndarray) else np.shape(a)
+
+
 def disc_probability(
     dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops = NUMPY, gate: bool = True
 ) -> Any:
@@ -176,7 +183,8 @@ class ExactRisk(RiskEstimator):
             np.maximum(fields[f], GEOMETRY_FLOOR) for f in ("sigma_x", "sigma_y", "half_x", "half_y")
         )
         near = signed_box_distance(dx, dy, hx, hy) < self.radius
-        shape = np.broadcast_shapes(near.shape, *(np.shape(fields[f]) for f in _BELIEF_FIELDS))
+        shapes = {near.shape, *(_shape(fields[f]) for f in _BELIEF_FIELDS)} - {()}
+        shape = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
         near = np.broadcast_to(near, shape).reshape(-1)
         index = None if near.all() else np.flatnonzero(near)
         out = np.zeros(shape)
