@@ -139,8 +139,10 @@ def _gather(value: np.ndarray | float, cols: np.ndarray | slice) -> np.ndarray |
 
 @functools.lru_cache(maxsize=8)
 def _state_of_entry(n: int) -> np.ndarray:
-    """The state (column) of each entry of a flattened ``(SEGMENTS, n)`` array."""
-    return np.tile(np.arange(n), SEGMENTS)
+    """The state (column) of each entry of a flattened ``(SEGMENTS, n)`` array (read-only)."""
+    index = np.tile(np.arange(n), SEGMENTS)
+    index.setflags(write=False)
+    return index
 
 
 def disc_probability_batch(
