@@ -1,7 +1,10 @@
-"""Two faces of the same elementary maths: numpy (vectorised) and CasADi (symbolic).
+"""Faces of the same elementary maths: numpy (vectorised), CasADi (symbolic) and Python floats.
 
 Every model in :mod:`risk_env` is written once against an :class:`Ops` namespace, so the
 simulator, the env's risk report and the MPC's constraints evaluate the very same formulas.
+:data:`MATH` (the ``math`` module on Python floats) serves scalar models where numpy's per-call
+cost would dominate (one ego state's expected severity); its vectors are plain lists, so vector
+maths with arithmetic on whole vectors (the disc probability) needs :data:`NUMPY` or :data:`CASADI`.
 Both faces avoid evaluating singular expressions in an unused branch (``sin(a)/a`` at 0, ``acos``
 at 1), so values and gradients stay finite everywhere.
 """
@@ -72,6 +75,8 @@ class Ops:
         """Standard normal CDF Phi(z)."""
         if self.name == "numpy":
             return special.ndtr(z)
+        if self.name == "math":  # erfc keeps the lower tail's relative precision, as ndtr does
+            return 0.5 * math.erfc(-z / _SQRT2)
         return 0.5 * (1.0 + self.erf(z / _SQRT2))
 
     def norm_pdf(self, z: Any) -> Any:
@@ -163,4 +168,29 @@ CASADI = Ops(
     part=lambda v, s: v[s],
     repeat=lambda v, k: ca.kron(v, ca.DM.ones(k, 1)),
     const=ca.DM,
+)
+
+MATH = Ops(
+    name="math",
+    sin=math.sin,
+    cos=math.cos,
+    exp=math.exp,
+    sqrt=math.sqrt,
+    erf=math.erf,
+    asin=math.asin,
+    acos=math.acos,
+    atan2=math.atan2,
+    abs=abs,
+    floor=math.floor,
+    maximum=max,
+    minimum=min,
+    where=lambda c, a, b: a if c else b,
+    stack=list,
+    stack_vectors=lambda vs: [e for v in vs for e in v],
+    expand=lambda a: a,
+    sort=sorted,
+    sum=math.fsum,
+    part=lambda v, s: v[s],
+    repeat=lambda v, k: [e for e in v for _ in range(k)],
+    const=lambda c: c.tolist(),
 )

@@ -24,28 +24,19 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from risk_env.ops import CASADI, NUMPY, Ops
+from risk_env.exact_kernel import disc_probability_batch, disc_probability_scalar
+from risk_env.ops import CASADI, MATH, NUMPY, Ops
 from risk_env.prediction import Belief
+from risk_env.quadrature import EDGE, GAUSS_W, GAUSS_X, GEOMETRY_FLOOR, SEGMENTS, SIGMA_BREAKS, SUPPORT
+from risk_env.quadrature import GAUSS_NODES as GAUSS_NODES
 from risk_env.scenario import Scenario
 from risk_env.severity import Severity, make_severity
 
 _BELIEF_FIELDS = tuple(f.name for f in dataclasses.fields(Belief))
 ESTIMATOR_NAMES: tuple[str, ...] = ("exact", "monte_carlo", "worst_case", "grid")
 
-GAUSS_NODES = 4
-"""Gauss-Legendre nodes per quadrature segment of the disc probability."""
-_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(GAUSS_NODES)
-_SIGMA_BREAKS = (-5.0, -2.5, -1.0, 0.0, 1.0, 2.5, 5.0)
-"""Where (in standard deviations of the outer axis) the quadrature splits."""
-_SEGMENTS = len(_SIGMA_BREAKS) + 5
-_NODE_X = np.tile(_GAUSS_X, _SEGMENTS)
-_NODE_W = np.tile(_GAUSS_W, _SEGMENTS)
-_EDGE = 1.0 - 1e-12
-SUPPORT = 7.0
-"""The outer quadrature covers at most +-SUPPORT standard deviations (mass beyond: < 3e-12)."""
-GEOMETRY_FLOOR = 1e-6
-"""Standard deviations and box half widths [m] below this are raised to it: a point mass is
-represented to within 1e-6 m."""
+_NODE_X = np.tile(GAUSS_X, SEGMENTS)
+_NODE_W = np.tile(GAUSS_W, SEGMENTS)
 
 
 def _ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
@@ -54,6 +45,13 @@ def _ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
             raise ValueError(f"ego state must have a last axis of 4 (c1, c2, theta, v), got {ego.shape}")
         return ego[..., 0], ego[..., 1], ego[..., 2], ego[..., 3]
     return ego[0], ego[1], ego[2], ego[3]
+
+
+def _shape(a: Any) -> tuple[int, ...]:
+    """``np.shape(a)``, without its array conversion for floats and arrays."""
+    if isinstance(a, float):
+        return ()
+    return a.shape if isinstance(a, np.ndarray) else np.shape(a)
 
 
 def disc_probability(
@@ -81,17 +79,17 @@ def disc_probability(
     ex = ops.expand
 
     # Angles where the outer coordinate meets a box edge or a multiple of its sigma ...
-    at_x = ops.stack([-hx, hx, *(k * sx for k in _SIGMA_BREAKS)])
+    at_x = ops.stack([-hx, hx, *(k * sx for k in SIGMA_BREAKS)])
     at_x = ops.clip(at_x, -SUPPORT * ex(sx), SUPPORT * ex(sx))
-    t_x = ops.asin(ops.clip((at_x - ex(dx)) / r, -_EDGE, _EDGE))
+    t_x = ops.asin(ops.clip((at_x - ex(dx)) / r, -EDGE, EDGE))
     t_lo = ops.part(t_x, slice(0, 1))
     t_hi = ops.maximum(ops.part(t_x, slice(1, 2)), t_lo)
     # ... and where the chord's ends cross the inner box edges: r cos t = |hy -+ dy|.
-    a = ops.acos(ops.clip(ops.stack([ops.abs(hy - dy), ops.abs(hy + dy)]) / r, 0.0, _EDGE))
+    a = ops.acos(ops.clip(ops.stack([ops.abs(hy - dy), ops.abs(hy + dy)]) / r, 0.0, EDGE))
     inner = ops.sort(ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi))
     edges = ops.stack_vectors([t_lo, inner, t_hi])
     lo, hi = ops.part(edges, slice(0, -1)), ops.part(edges, slice(1, None))
-    k = len(_GAUSS_X)
+    k = len(GAUSS_X)
     half = ops.repeat(0.5 * (hi - lo), k)
     t = ops.repeat(0.5 * (hi + lo), k) + half * ops.const(_NODE_X)
     w = half * ops.const(_NODE_W)
@@ -173,24 +171,62 @@ class ExactRisk(RiskEstimator):
 
     def risk(self, ego, belief, rng=None):
         """As :meth:`RiskEstimator.risk`; states whose disc misses the truncation box get exactly
-        0 without quadrature (the same value the full formula gives), the rest are integrated."""
+        0 without quadrature (the same value the full formula gives), the rest are integrated by
+        the numpy kernels of :mod:`risk_env.exact_kernel` (equal to the generic form to rounding)."""
         ego = np.asarray(ego, dtype=float)
-        x, y, _, _ = _ego_parts(ego)
-        hx = np.maximum(belief.half_x, GEOMETRY_FLOOR)
-        hy = np.maximum(belief.half_y, GEOMETRY_FLOOR)
-        near = signed_box_distance(x - belief.x, y - belief.y, hx, hy) < self.radius
-        if np.all(near):
-            return np.asarray(self._risk(ego, belief, NUMPY, gate=False))
-        shape = np.broadcast_shapes(near.shape, np.shape(belief.x))
+        fields = vars(belief)
+        if ego.shape == (4,) and all(isinstance(fields[f], (float, int)) for f in _BELIEF_FIELDS):
+            return np.asarray(self._risk_one(ego, belief))
+        x, y, th, v = _ego_parts(ego)
+        dx, dy = x - belief.x, y - belief.y
+        sx, sy, hx, hy = (
+            np.maximum(fields[f], GEOMETRY_FLOOR) for f in ("sigma_x", "sigma_y", "half_x", "half_y")
+        )
+        near = signed_box_distance(dx, dy, hx, hy) < self.radius
+        shapes = {near.shape, *(_shape(fields[f]) for f in _BELIEF_FIELDS)} - {()}
+        shape = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
+        near = np.broadcast_to(near, shape).reshape(-1)
+        index = None if near.all() else np.flatnonzero(near)
         out = np.zeros(shape)
-        if np.any(near):
-            near = np.broadcast_to(near, shape)
-            ego_b = np.broadcast_to(ego, shape + (4,))[near]
-            fields = {
-                f: np.broadcast_to(np.asarray(getattr(belief, f), float), shape)[near] for f in _BELIEF_FIELDS
-            }
-            out[near] = self._risk(ego_b, Belief(**fields), NUMPY, gate=False)
+        m = out.size if index is None else len(index)
+        if m == 0:
+            return out
+
+        def pick(a: Any) -> Any:
+            """``a`` at the near states, flattened; scalars stay scalars."""
+            a = np.asarray(a, dtype=float)
+            if a.ndim == 0:
+                return a
+            a = np.broadcast_to(a, shape).reshape(-1)
+            return a if index is None else a[index]
+
+        p = disc_probability_batch(
+            np.broadcast_to(pick(dx), (m,)),
+            np.broadcast_to(pick(dy), (m,)),
+            self.radius,
+            *(pick(a) for a in (sx, sy, hx, hy)),
+        )
+        near_belief = Belief(**{f: pick(fields[f]) for f in _BELIEF_FIELDS})
+        p *= self.severity.expected(pick(v), pick(th), near_belief, NUMPY)
+        if index is None:
+            return p.reshape(shape)
+        out.reshape(-1)[index] = p
         return out
+
+    def _risk_one(self, ego: np.ndarray, belief: Belief) -> float:
+        """R for one ego state ``(4,)`` against a belief of scalars, in Python floats."""
+        x, y, th, v = ego.tolist()
+        dx, dy = x - belief.x, y - belief.y
+        hx = max(belief.half_x, GEOMETRY_FLOOR)
+        hy = max(belief.half_y, GEOMETRY_FLOOR)
+        if not signed_box_distance(dx, dy, hx, hy, MATH) < self.radius:
+            return 0.0
+        sx = max(belief.sigma_x, GEOMETRY_FLOOR)
+        sy = max(belief.sigma_y, GEOMETRY_FLOOR)
+        p = disc_probability_scalar(
+            float(dx), float(dy), self.radius, float(sx), float(sy), float(hx), float(hy)
+        )
+        return p * float(self.severity.expected(v, th, belief, MATH))
 
 
 class MonteCarloRisk(RiskEstimator):

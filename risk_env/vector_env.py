@@ -5,7 +5,8 @@ one estimator call.
 ``vectorization_mode="sync"`` or ``"async"`` builds Gymnasium's vector envs of single envs
 instead. Copy i behaves exactly like ``gym.make("RiskCrossing-v0", ...)`` reset with
 ``seed + i``: the same arguments, its own generator drawn in the same order, the same transition
-(:mod:`risk_env.transition`). Tests hold the three modes to the same numbers.
+(:mod:`risk_env.transition`). Tests hold the three modes to the same numbers (to 1e-9: the
+exact risk of one state and of a batch run through two numpy kernels that agree to ~1e-11).
 """
 
 from __future__ import annotations

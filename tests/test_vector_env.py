@@ -42,6 +42,7 @@ def _run(mode: str, autoreset: AutoresetMode, steps: int, num_envs: int = 3, **k
 
 
 def _assert_same(a, b) -> None:
+    """Equal up to the exact risk's two kernels (one state / a batch), which agree to ~1e-11."""
     ends = 0
     for step_a, step_b in zip(a, b, strict=True):
         for part_a, part_b in zip(step_a, step_b, strict=True):
@@ -49,9 +50,9 @@ def _assert_same(a, b) -> None:
                 fa, fb = _flatten(part_a), _flatten(part_b)
                 assert fa.keys() == fb.keys()
                 for key in fa:
-                    np.testing.assert_allclose(fa[key], fb[key], rtol=1e-12, atol=1e-12, err_msg=key)
+                    np.testing.assert_allclose(fa[key], fb[key], rtol=1e-9, atol=1e-9, err_msg=key)
             else:
-                np.testing.assert_allclose(part_a, part_b, rtol=1e-12, atol=1e-12)
+                np.testing.assert_allclose(part_a, part_b, rtol=1e-9, atol=1e-9)
         if len(step_a) == 5:
             ends += int(np.sum(step_a[2] | step_a[3]))
     assert ends >= 2, "the comparison should cover episode ends"
