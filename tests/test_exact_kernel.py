@@ -161,3 +161,25 @@ def test_exact_risk_every_path_equals_generic_form(severity):
     scale = np.asarray(est.severity.expected(steps[:, 3], steps[:, 2], beliefs, NUMPY))
     assert np.all(ref > 0)
     assert np.all(np.abs(est.risk(steps, beliefs) - ref) <= P_TOL * scale)
+
+
+def test_few_near_states_take_the_scalar_loop_and_agree():
+    """Batches with up to SCALAR_LOOP_MAX near states (one belief per state) are integrated one by
+    one; with one more they take the batch kernel. Both equal the generic form."""
+    from risk_env.risk import SCALAR_LOOP_MAX
+
+    s = Scenario.preset("high")
+    est = make_estimator("exact", s)
+    rng = np.random.default_rng(8)
+    for near in (1, SCALAR_LOOP_MAX, SCALAR_LOOP_MAX + 1):
+        n = near + 3  # three far states ride along
+        meas = np.column_stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-3, 3, n)])
+        meas = np.column_stack([meas, np.full(n, 3.0), np.zeros(n)])
+        b = predict_array(s, meas, steps=2)[2]
+        offset = np.where(np.arange(n) < near, 2.0, 40.0)
+        egos = np.column_stack([b.x + offset, b.y - 1.0, rng.uniform(-3, 3, n), rng.uniform(0, 6, n)])
+        ref = np.asarray(est._risk(egos, b, NUMPY))
+        scale = np.asarray(est.severity.expected(egos[:, 3], egos[:, 2], b, NUMPY))
+        got = est.risk(egos, b)
+        assert np.all(ref[:near] > 0) and np.all(got[near:] == 0)
+        assert np.all(np.abs(got - ref) <= P_TOL * scale)
