@@ -50,18 +50,18 @@ against 7.2 / 41 ms, neither with a failed solve. The two may settle in differen
 from __future__ import annotations
 
 import atexit
-import contextlib
 import dataclasses
 import functools
 import hashlib
 import math
 import os
+import shlex
 import shutil
+import subprocess
 import tempfile
 import time
 import warnings
 from collections import OrderedDict
-from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -91,6 +91,8 @@ DEFAULT_JIT_CACHE = os.environ.get(
     "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
 )
 """Where jit-compiled solvers are kept between processes."""
+_COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
+"""The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
 _CACHE_SIZE = 48
 _SOLVER_CACHE: OrderedDict[Any, _Problem] = OrderedDict()
 
@@ -333,6 +335,11 @@ class PathFollowingMPC:
         epsilon = 0 (only with :attr:`ZERO_TOLERANCE_VARIANT`)."""
         raise NotImplementedError
 
+    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
+        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, and
+        the solver iterations that took; None: start from the rollouts."""
+        return None
+
     def _risk_data(self, beliefs: Belief) -> np.ndarray:
         """Per-step risk data ``(N, *shape)`` for one solve (Monte Carlo: fresh draws)."""
         return np.zeros((self.horizon, 0, 0))
@@ -484,12 +491,11 @@ class PathFollowingMPC:
         jit = self.jit and have_c_compiler()
         if self.jit and not jit:
             warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=4)
-        solver = None
+        solver = ca.nlpsol("mpc", self.solver_name, nlp, options)
         if jit:
-            solver = self._jit_solver(nlp, options)
-            jit = solver is not None
-        if solver is None:
-            solver = ca.nlpsol("mpc", self.solver_name, nlp, options)
+            compiled = self._compiled_solver(solver, nlp, options)
+            jit = compiled is not None
+            solver = compiled if jit else solver
 
         index = {tag: i for i, tag in enumerate(w_tags)}
         return _Problem(
@@ -510,50 +516,56 @@ class PathFollowingMPC:
             jit=jit,
         )
 
-    def _jit_solver(self, nlp: dict[str, ca.SX], options: dict[str, Any]) -> ca.Function | None:
-        """The solver with jit-compiled functions, from the disk cache when it holds this exact NLP
-        (keyed by a hash of the serialized NLP, the options and the CasADi version)."""
-        jit_options = {
-            "jit": True,
-            "compiler": "shell",
-            "jit_cleanup": False,
-            "jit_serialize": "embed",
-            "jit_options": {
-                "compiler": os.environ.get("CC", "gcc"),
-                "flags": [f"-O{self.jit_opt}"],
-                "verbose": False,
-                "cleanup": False,
-            },
-        }
-        path = None
-        if self.jit_cache is not None:
-            definition = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
-            digest = hashlib.sha256(
-                "\n".join(
-                    [ca.__version__, self.solver_name, repr(options), repr(jit_options), definition]
-                ).encode()
-            ).hexdigest()[:32]
-            path = os.path.join(os.fspath(self.jit_cache), f"mpc_{digest}.casadi")
-            if os.path.exists(path):
-                try:
-                    return ca.Function.load(path)
-                except Exception as err:  # a stale or broken file: compile anew
-                    warnings.warn(f"could not load the jit cache {path} ({err}); compiling", stacklevel=5)
+    def _compiled_solver(
+        self, solver: ca.Function, nlp: dict[str, ca.SX], options: dict[str, Any]
+    ) -> ca.Function | None:
+        """``solver`` with its functions (the NLP and the derivatives it evaluates) compiled into a
+        shared library, loaded from the disk cache when it holds this exact NLP.
+
+        The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or
+        gcc) at ``-O{jit_opt}`` in a private temporary directory, then moved into
+        :attr:`jit_cache` under a hash of the NLP, the CasADi version and the compiler flags, so
+        any later process (or agent) with the same NLP loads it in milliseconds. Nothing is
+        written to the working directory and the process never changes directory (CasADi's own
+        ``jit`` option writes its C source into the working directory whatever
+        ``jit_options["directory"]`` says, in CasADi 3.8's nlpsol). Returns None (with a warning)
+        when code generation, compilation or loading fails.
+        """
+        names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
+        oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
+        compiler = os.environ.get("CC", "gcc")
+        flags = [f"-O{self.jit_opt}"]
+        key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
+        digest = hashlib.sha256("\n".join(key).encode()).hexdigest()[:24]
+        name = f"riskmpc_{digest}"
+        cache = _private_cache() if self.jit_cache is None else os.fspath(self.jit_cache)
+        library = os.path.join(cache, f"{name}.so")
         try:
-            with _jit_directory():  # CasADi writes its jit files to the working directory
-                solver = ca.nlpsol("mpc", self.solver_name, nlp, {**options, **jit_options})
+            if not os.path.exists(library):
+                os.makedirs(cache, exist_ok=True)
+                with tempfile.TemporaryDirectory(prefix="riskmpc_build_") as tmp:
+                    generator = ca.CodeGenerator(name, {"with_header": False})
+                    generator.add(oracle)
+                    for n in names:
+                        generator.add(solver.get_function(n))
+                    source = generator.generate(tmp + os.sep)
+                    built = os.path.join(tmp, f"{name}.so")
+                    subprocess.run(
+                        [*shlex.split(compiler), "-fPIC", "-shared", *flags, source, "-o", built],
+                        cwd=tmp,
+                        check=True,
+                        capture_output=True,
+                    )
+                    partial = f"{library}.{os.getpid()}.tmp"
+                    shutil.move(built, partial)
+                    os.replace(partial, library)  # atomic: no process loads a half-written library
+            # the oracle is the library's compiled "nlp": nothing left to expand
+            loaded = {k: v for k, v in options.items() if k != "expand"}
+            return ca.nlpsol("mpc", self.solver_name, library, loaded)
         except Exception as err:  # a broken compiler must not break the agent
-            warnings.warn(f"jit compilation failed ({err}); building without jit", stacklevel=5)
+            detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]
+            warnings.warn(f"compiling the solver failed ({err} {detail}); building without jit", stacklevel=5)
             return None
-        if path is not None:
-            try:
-                os.makedirs(os.path.dirname(path), exist_ok=True)
-                tmp = f"{path}.{os.getpid()}.tmp"
-                solver.save(tmp)
-                os.replace(tmp, path)
-            except OSError as err:
-                warnings.warn(f"could not write the jit cache {path} ({err})", stacklevel=5)
-        return solver
 
     # ------------------------------------------------------------------ one step
     def _measured_state(self, o: ob.Observation) -> np.ndarray:
@@ -710,14 +722,22 @@ class PathFollowingMPC:
         iterations, status, ok, out, timings, t_solver = 0, "not solved", False, {}, {}, 0.0
         best: tuple[dict[str, np.ndarray], str, dict[str, float]] | None = None
         cold: list[np.ndarray] | None = None
-        for attempt in range(int(warm) + self.cold_starts):
+        planned = None if warm else self._pilot_plan(index, obs_vec, variant)
+        pilot = None
+        if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
+            inputs, iterations = planned
+            pilot = self._pack(pr, self._rollout(pr, x0, inputs), inputs)
+        for attempt in range(int(warm or pilot is not None) + self.cold_starts):
             if warm and attempt == 0:
                 w0, lam_x, lam_g = self._warm_guess(pr, mem, x0)
+            elif pilot is not None and attempt == 0:
+                w0, lam_x, lam_g = pilot, None, None
             else:
                 cold = self._cold_guesses(pr, x0, p, lbg) if cold is None else cold
-                if attempt - int(warm) >= len(cold):
+                skip = int(warm or pilot is not None)
+                if attempt - skip >= len(cold):
                     break
-                w0, lam_x, lam_g = cold[attempt - int(warm)], None, None
+                w0, lam_x, lam_g = cold[attempt - skip], None, None
             args = {"x0": w0, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": pr.ubg, "p": p}
             if lam_x is not None:
                 args.update(lam_x0=lam_x, lam_g0=lam_g)
@@ -727,7 +747,7 @@ class PathFollowingMPC:
             iterations += iters
             if ok and (best is None or out["f"][0] < best[0]["f"][0]):
                 best = (out, status, timings)
-            if ok and not first:
+            if ok and (not first or (pilot is not None and attempt == 0)):
                 break
         retried = best is not None and attempt > 0 and not first
         ok = best is not None
@@ -809,14 +829,9 @@ class PathFollowingMPC:
         return bool(np.hypot(*(o.ego_pose[:2] - mem["predicted"])) > 1.0)
 
 
-@contextlib.contextmanager
-def _jit_directory() -> Iterator[None]:
-    """Run the block in a fresh temporary directory (removed when the interpreter exits)."""
-    tmp = tempfile.mkdtemp(prefix="riskmpc_jit_")
-    atexit.register(shutil.rmtree, tmp, ignore_errors=True)
-    cwd = os.getcwd()
-    os.chdir(tmp)
-    try:
-        yield
-    finally:
-        os.chdir(cwd)
+@functools.cache
+def _private_cache() -> str:
+    """A per-process directory for compiled solvers when ``jit_cache=None`` (removed at exit)."""
+    path = tempfile.mkdtemp(prefix="riskmpc_jit_")
+    atexit.register(shutil.rmtree, path, ignore_errors=True)
+    return path
