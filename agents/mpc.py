@@ -63,6 +63,7 @@ import time
 import warnings
 from collections import OrderedDict
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -357,7 +358,7 @@ class PathFollowingMPC:
             key = (
                 type(self).__name__,
                 variant,
-                self.scenario.replace(risk_tolerance=0.0),
+                _problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.solver_name,
                 self.stage_cost,
@@ -423,15 +424,19 @@ class PathFollowingMPC:
         N, dt, path, ego = sc.horizon, sc.dt, sc.path, sc.ego
         w_c1, w_c2, w_th, w_v = sc.cost_weights
 
-        # --- parameters: object measurement, epsilon, per-step risk data; the object's beliefs
+        # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
+        # share one solver), per-step risk data; the object's beliefs
         p_obj = ca.SX.sym("object", 5)
         p_eps = ca.SX.sym("epsilon")
+        p_unc = ca.SX.sym("uncertainty", len(_uncertainty_vector(sc)))
         p_data = [ca.SX.sym(f"risk_data_{n}", *self._risk_parameter_shape()) for n in range(1, N + 1)]
-        p = ca.vertcat(p_obj, p_eps, *(ca.vec(d) for d in p_data))
-        beliefs = predict(sc, p_obj, steps=N, ops=CASADI)
+        p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
+        beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=_symbolic_uncertainty(p_unc))
         fields = [f.name for f in dataclasses.fields(Belief)]
         belief_fn = ca.Function(
-            "beliefs", [p_obj], [ca.vertcat(*(ca.horzcat(*(getattr(b, k) for k in fields)) for b in beliefs))]
+            "beliefs",
+            [p_obj, p_unc],
+            [ca.vertcat(*(ca.horzcat(*(getattr(b, k) for k in fields)) for b in beliefs))],
         )
 
         # --- stage functions: ego model with the timing law, pose error
@@ -706,11 +711,14 @@ class PathFollowingMPC:
             mem = None
         x0 = self._measured_state(o)
         base = self._problem("free")
-        future = Belief.from_array(np.asarray(base.beliefs(o.object_measurement))[1:])
+        uncertainty = _uncertainty_vector(sc)
+        future = Belief.from_array(np.asarray(base.beliefs(o.object_measurement, uncertainty))[1:])
         variant = self._risk_variant() if self._risk_possible(x0, future) else "free"
         pr = self._problem(variant)
         data = self._risk_data(future)
-        p = np.concatenate([o.object_measurement, [self._epsilon], *(d.ravel(order="F") for d in data)])
+        p = np.concatenate(
+            [o.object_measurement, [self._epsilon], uncertainty, *(d.ravel(order="F") for d in data)]
+        )
         lbx, ubx = self._bounds(pr, x0)
         lbg = pr.lbg.copy()
         lbg[pr.risk_rows] = self.backoff
@@ -835,3 +843,36 @@ def _private_cache() -> str:
     path = tempfile.mkdtemp(prefix="riskmpc_jit_")
     atexit.register(shutil.rmtree, path, ignore_errors=True)
     return path
+
+
+_UNCERTAINTY_FIELDS = (
+    ("sigma0", 3),
+    ("sigma_growth", 3),
+    ("box_half_width0", 2),
+    ("box_growth", 3),
+    ("velocity_bounds0", 2),
+)
+
+
+def _uncertainty_vector(scenario: Scenario) -> np.ndarray:
+    """The scenario's :class:`~risk_env.scenario.Uncertainty` as the solver's parameter vector."""
+    u = scenario.uncertainty
+    return np.concatenate([np.asarray(getattr(u, name), float) for name, _ in _UNCERTAINTY_FIELDS])
+
+
+def _symbolic_uncertainty(p: ca.SX) -> SimpleNamespace:
+    """An uncertainty whose numbers are the entries of ``p`` (as :func:`_uncertainty_vector` lays
+    them out), for :func:`risk_env.predict`."""
+    out, i = {}, 0
+    for name, length in _UNCERTAINTY_FIELDS:
+        out[name] = tuple(p[i + k] for k in range(length))
+        i += length
+    return SimpleNamespace(**out)
+
+
+def _problem_key(scenario: Scenario) -> tuple[Any, ...]:
+    """What of the scenario is built into a solver: all but epsilon and the uncertainty."""
+    skip = ("risk_tolerance", "uncertainty")
+    return tuple(
+        (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
+    )

@@ -305,7 +305,8 @@ class MonteCarloRisk(RiskEstimator):
         _, _, th, v = _ego_parts(ego)
         dist = self.distances(ego, samples)
         # logistic written with tanh: no overflow (and no NaN gradient) for far draws
-        hit = 0.5 * (1.0 - ca.tanh(0.5 * (dist - self.radius) / self.width(belief, CASADI)))
+        inverse = 0.5 / self.width(belief, CASADI)  # once, not per draw
+        hit = 0.5 * (1.0 - ca.tanh((dist - self.radius) * inverse))
         s = self.severity.smooth_value(v, th, samples[:, 2], belief.theta, ops, self.severity_width)
         return ca.sum1(hit * s) / samples.shape[0]
 

@@ -378,6 +378,27 @@ def test_monte_carlo_cold_start_goes_through_the_pilot():
     np.testing.assert_allclose(agent.last_solve.inputs, direct.last_solve.inputs, atol=0.05)
 
 
+def test_uncertainty_levels_and_tolerances_share_one_solver():
+    """Epsilon and the uncertainty are solver parameters: one build serves them all, and each agent
+    still plans against its own beliefs."""
+    from agents import mpc
+
+    mpc._SOLVER_CACHE.clear()
+    first = SMPC(Scenario.preset("low", risk_tolerance=500.0))
+    assert first.build_time > 0
+    levels = ("medium", "high")
+    others = [SMPC(Scenario.preset(level, risk_tolerance=eps)) for level in levels for eps in (250.0, 1000.0)]
+    assert all(agent.build_time == 0.0 for agent in others)
+    assert SMPC(Scenario.preset("low", risk_tolerance=0.0)).build_time > 0  # the epsilon = 0 form
+    assert SMPC(Scenario.preset("high", risk_tolerance=0.0)).build_time == 0.0
+    for agent in (first, others[1], others[3]):  # low 500, medium 1000, high 1000
+        obs = start_observation(agent.scenario)
+        agent.predict(obs)
+        risk = plan_risk(agent, agent.scenario, obs, "exact")
+        assert agent.last_solve.success and np.all(risk <= agent.risk_tolerance + RISK_TOLERANCE_J)
+        np.testing.assert_allclose(agent.last_solve.risk, risk, rtol=1e-9, atol=1e-9)
+
+
 def test_agents_with_different_estimators_share_a_process():
     """Solver caching must not hand one estimator's problem (and parameter layout) to another."""
     import gymnasium as gym
