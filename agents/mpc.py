@@ -25,9 +25,11 @@ The optimal control problem, in the order of the sections of :meth:`PathFollowin
   the subclass's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, and
-  the subclass's risk data (Monte Carlo draws). epsilon is a parameter, so agents that differ only
-  in their tolerance share one built solver (cached per process).
+- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, the
+  numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box, speed
+  bounds) and the subclass's risk data (Monte Carlo draws). Agents that differ only in their
+  tolerance or uncertainty level share one built (or compiled) solver (cached per process, and on
+  disk when compiled).
 - **Variants** of the same NLP, each built once: ``"general"``; ``"zero"`` (the subclass's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon (distance to the truncation box minus the distance
@@ -36,7 +38,15 @@ The optimal control problem, in the order of the sections of :meth:`PathFollowin
 - **Initial guess**: the previous solution shifted by one stage (inputs shifted, the last repeated,
   states re-simulated from the measurement) with its shifted multipliers. The first solve of an
   episode solves from each of a few rollouts (brake, track the path, reverse) and keeps the plan of
-  least cost.
+  least cost; a subclass may instead hand it the plan of a cheaper pilot problem
+  (:meth:`PathFollowingMPC._pilot_plan`, the Monte Carlo SMPC's 100-draw pilot), which did that.
+- **Compiled solvers** (``jit=True``): the same NLP is assembled once more in MX with the stage
+  functions (dynamics, pose cost, risk row) called rather than inlined, its functions (the NLP and
+  the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGenerator`, compiled
+  by ``$CC`` (gcc) at ``-O{jit_opt}`` into a shared library in a private temporary directory and
+  kept in ``jit_cache`` under a hash of the NLP, so later processes load it; nlpsol then runs from
+  the library. Nothing is written to the working directory and the process never changes
+  directory. Timings: ``python -m benchmarks.timing --jit`` and the README.
 
 Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
 Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
@@ -91,7 +101,7 @@ FREE_MARGIN = 0.5
 DEFAULT_JIT_CACHE = os.environ.get(
     "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
 )
-"""Where jit-compiled solvers are kept between processes."""
+"""Where compiled solvers (shared libraries) are kept between processes."""
 _COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
 """The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
 _CACHE_SIZE = 48
@@ -157,12 +167,17 @@ class PathFollowingMPC:
         risk_tolerance: epsilon [units of the severity], >= 0; overrides the scenario's.
         solver: one of :data:`SOLVERS`.
         stage_cost: one of :data:`STAGE_COSTS` (see :mod:`agents.mpc`).
-        jit: compile the NLP's functions with CasADi's shell compiler at ``-O{jit_opt}``; falls
-            back to no jit (with a warning) when no C compiler exists or compilation fails. Off by
-            default: compiling the exact risk's Hessian takes one to two minutes per NLP (see
-            :attr:`build_time`); the evaluations then run 2-4x faster.
-        jit_cache: directory where compiled solvers are kept (serialized with the binary
-            embedded) and reused by later processes; ``None`` compiles every time. Default:
+        jit: run the solver on compiled code (see "Compiled solvers" in :mod:`agents.mpc`); falls
+            back to the uncompiled solver (with a warning) when no C compiler exists or code
+            generation, compilation or loading fails. Off by default: the first build compiles
+            (the exact SMPC's three variants, shared by every uncertainty level and tolerance, in
+            about 40 s at -O1 on the project's machine; see :attr:`build_time`), later builds load
+            the cached library in well under a second; the evaluations then run about twice as
+            fast.
+        jit_opt: the C compiler's optimisation level (``-O1`` runs as fast as ``-O3`` here and
+            compiles in about 60 % of its time; ``-O0`` is no faster than uncompiled).
+        jit_cache: directory where compiled solvers (shared libraries) are kept and reused by later
+            processes; ``None``: a per-process temporary directory. Default:
             ``$RISKMPC_JIT_CACHE`` or ``~/.cache/riskcrossing/jit``.
         tol, max_iter: solver tolerance and iteration limit.
         warm_start: start from the shifted previous solution (IPOPT: with its multipliers).
@@ -424,52 +439,113 @@ class PathFollowingMPC:
         N, dt, path, ego = sc.horizon, sc.dt, sc.path, sc.ego
         w_c1, w_c2, w_th, w_v = sc.cost_weights
 
-        # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
-        # share one solver), per-step risk data; the object's beliefs
-        p_obj = ca.SX.sym("object", 5)
-        p_eps = ca.SX.sym("epsilon")
-        p_unc = ca.SX.sym("uncertainty", len(_uncertainty_vector(sc)))
-        p_data = [ca.SX.sym(f"risk_data_{n}", *self._risk_parameter_shape()) for n in range(1, N + 1)]
-        p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
-        beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=_symbolic_uncertainty(p_unc))
-        fields = [f.name for f in dataclasses.fields(Belief)]
-        belief_fn = ca.Function(
-            "beliefs",
-            [p_obj, p_unc],
-            [ca.vertcat(*(ca.horzcat(*(getattr(b, k) for k in fields)) for b in beliefs))],
-        )
-
-        # --- stage functions: ego model with the timing law, pose error
+        # --- stage functions: ego model with the timing law, pose error, the risk row
         x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
         pose_next = casadi_step(x[0:3], u[0:2], dt)
         lam_next = timing_law(path, x[3], x[2], u[2], dt, CASADI)
         f = ca.Function("f", [x, u], [ca.vertcat(pose_next, lam_next, u[0], u[1])])
         e1, e2, e3, _ = path_error(path, x[0], x[1], x[2], 0.0, x[3], ego.v_ref, CASADI, wrap=False)
         pose_cost = ca.Function("pose_cost", [x], [w_c1 * e1**2 + w_c2 * e2**2 + w_th * e3**2])
+        risk = None
+        if variant != "free":
+            ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
+            eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *self._risk_parameter_shape())
+            margin = self._margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, variant == "zero")
+            # only the ego state is a variable: no derivatives for the rest (compiled code: less)
+            risk = ca.Function(
+                "risk",
+                [ego_s, belief_s, eps_s, data_s],
+                [margin],
+                {"is_diff_in": [True, False, False, False]},
+            )
+        stages = {"f": f, "pose_cost": pose_cost, "risk": risk}
+
+        # --- the NLP in SX, every stage function inlined (what the solver runs uncompiled)
+        nlp, layout, belief_fn = self._assemble(ca.SX, variant, stages)
+        w_tags, g_tags, lbg, ubg = layout
+        p = nlp["p"]
+
+        # --- solver
+        options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
+        options.update(self._plugin_options())
+        if self.solver_name == "fatrop":
+            options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
+        jit = self.jit and have_c_compiler()
+        if self.jit and not jit:
+            warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=4)
+        solver = ca.nlpsol("mpc", self.solver_name, nlp, options)
+        if jit:
+            # the same NLP in MX, the stage functions called rather than inlined: the generated C
+            # code holds the risk row and its derivatives once instead of N times
+            calls, *_ = self._assemble(ca.MX, variant, stages)
+            compiled = self._compiled_solver(calls, {**options, "expand": False})
+            jit = compiled is not None
+            solver = compiled if jit else solver
+
+        index = {tag: i for i, tag in enumerate(w_tags)}
+        return _Problem(
+            variant=variant,
+            solver=solver,
+            evaluate=ca.Function("evaluate", [nlp["x"], p], [nlp["f"], nlp["g"]]),
+            rollout=f.mapaccum(N),
+            beliefs=belief_fn,
+            lbg=np.array(lbg),
+            ubg=np.array(ubg),
+            x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
+            u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
+            risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+            w_tags=tuple(w_tags),
+            shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
+            g_tags=tuple(g_tags),
+            build_time=time.perf_counter() - t0,
+            jit=jit,
+        )
+
+    def _assemble(
+        self, sym: type, variant: str, stages: dict[str, ca.Function | None]
+    ) -> tuple[dict[str, Any], tuple[list, list, list, list], ca.Function]:
+        """The NLP of :meth:`_build` with symbols of type ``sym`` (``ca.SX``: the stage functions
+        inlined; ``ca.MX``: called), its layout ``(w_tags, g_tags, lbg, ubg)`` and the beliefs'
+        function."""
+        sc = self.scenario
+        N, ego = sc.horizon, sc.ego
+        w_v = sc.cost_weights[3]
+        f, pose_cost, risk = stages["f"], stages["pose_cost"], stages["risk"]
+
+        # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
+        # share one solver), per-step risk data; the object's beliefs
+        p_obj = sym.sym("object", 5)
+        p_eps = sym.sym("epsilon")
+        p_unc = sym.sym("uncertainty", len(_uncertainty_vector(sc)))
+        p_data = [sym.sym(f"risk_data_{n}", *self._risk_parameter_shape()) for n in range(1, N + 1)]
+        p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
+        beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=_symbolic_uncertainty(p_unc))
+        fields = [f.name for f in dataclasses.fields(Belief)]
+        stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
+        belief_fn = ca.Function("beliefs", [p_obj, p_unc], [ca.horzcat(*stacked).T])
 
         # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
-        X = [ca.SX.sym(f"x_{n}", NX) for n in range(N + 1)]
-        U = [ca.SX.sym(f"u_{n}", NU) for n in range(N)]
-        w: list[ca.SX] = []
+        X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
+        U = [sym.sym(f"u_{n}", NU) for n in range(N)]
+        w: list[Any] = []
         w_tags: list[tuple[int, str, int]] = []
-        g: list[ca.SX] = []
+        g: list[Any] = []
         g_tags: list[tuple[int, str, int]] = []
         lbg: list[float] = []
         ubg: list[float] = []
 
-        def add_g(expr: ca.SX, lo: float, hi: float, stage: int, kind: str) -> None:
+        def add_g(expr: Any, lo: float, hi: float, stage: int, kind: str) -> None:
+            g.append(expr)
             for i in range(expr.numel()):
-                g.append(expr[i])
                 g_tags.append((stage, kind, i))
                 lbg.append(lo)
                 ubg.append(hi)
 
         def add_risk(n: int) -> None:
-            if variant == "free":
+            if risk is None:
                 return
             ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-            margin = self._margin(ego_n, beliefs[n], p_eps, p_data[n - 1], variant == "zero")
-            add_g(margin, 0.0, math.inf, n, "risk")
+            add_g(risk(ego_n, stacked[n], p_eps, p_data[n - 1]), 0.0, math.inf, n, "risk")
 
         # --- objective, dynamics, rate limits and risk, stage-wise
         cost = 0.0
@@ -486,58 +562,27 @@ class PathFollowingMPC:
         w.append(X[N])
         w_tags += [(N, "x", i) for i in range(NX)]
         add_risk(N)
-
-        # --- solver
         nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
-        options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
-        options.update(self._plugin_options())
-        if self.solver_name == "fatrop":
-            options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
-        jit = self.jit and have_c_compiler()
-        if self.jit and not jit:
-            warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=4)
-        solver = ca.nlpsol("mpc", self.solver_name, nlp, options)
-        if jit:
-            compiled = self._compiled_solver(solver, nlp, options)
-            jit = compiled is not None
-            solver = compiled if jit else solver
+        return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
 
-        index = {tag: i for i, tag in enumerate(w_tags)}
-        return _Problem(
-            variant=variant,
-            solver=solver,
-            evaluate=ca.Function("evaluate", [nlp["x"], p], [cost, nlp["g"]]),
-            rollout=f.mapaccum(N),
-            beliefs=belief_fn,
-            lbg=np.array(lbg),
-            ubg=np.array(ubg),
-            x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
-            u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
-            risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
-            w_tags=tuple(w_tags),
-            shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
-            g_tags=tuple(g_tags),
-            build_time=time.perf_counter() - t0,
-            jit=jit,
-        )
-
-    def _compiled_solver(
-        self, solver: ca.Function, nlp: dict[str, ca.SX], options: dict[str, Any]
-    ) -> ca.Function | None:
-        """``solver`` with its functions (the NLP and the derivatives it evaluates) compiled into a
-        shared library, loaded from the disk cache when it holds this exact NLP.
+    def _compiled_solver(self, nlp: dict[str, Any], options: dict[str, Any]) -> ca.Function | None:
+        """The solver of ``nlp`` with its functions (the NLP and the derivatives the solver
+        evaluates) compiled into a shared library, loaded from the disk cache when it holds this
+        exact NLP.
 
         The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or
-        gcc) at ``-O{jit_opt}`` in a private temporary directory, then moved into
-        :attr:`jit_cache` under a hash of the NLP, the CasADi version and the compiler flags, so
-        any later process (or agent) with the same NLP loads it in milliseconds. Nothing is
-        written to the working directory and the process never changes directory (CasADi's own
-        ``jit`` option writes its C source into the working directory whatever
-        ``jit_options["directory"]`` says, in CasADi 3.8's nlpsol). Returns None (with a warning)
-        when code generation, compilation or loading fails.
+        gcc) at ``-O{jit_opt}`` in a private temporary directory, then moved into ``jit_cache``
+        under a hash of the NLP, the CasADi version and the compiler flags, so any later process
+        (or agent) with the same NLP loads it in milliseconds. Nothing is written to the working
+        directory and the process never changes directory. (CasADi's own ``jit`` option, used
+        before, cannot promise that: in CasADi 3.8 nlpsol's jit writes its C source to the working
+        directory whatever ``jit_options["directory"]`` says, and only the object files follow
+        that option.) Returns None (with a warning) when code generation, compilation or loading
+        fails.
         """
-        names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
         oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
+        solver = ca.nlpsol("mpc", self.solver_name, oracle, options)  # for its derivative functions
+        names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
         compiler = os.environ.get("CC", "gcc")
         flags = [f"-O{self.jit_opt}"]
         key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
