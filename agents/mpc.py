@@ -109,8 +109,10 @@ _SOLVER_CACHE: OrderedDict[Any, _Problem] = OrderedDict()
 
 
 def have_c_compiler() -> bool:
-    """Whether CasADi's shell compiler (``$CC`` or ``gcc``) can be found."""
-    return shutil.which(os.environ.get("CC", "gcc")) is not None
+    """Whether the C compiler for compiled solvers (``$CC``, e.g. ``"ccache gcc"``, or ``gcc``) can
+    be found."""
+    command = shlex.split(os.environ.get("CC", "gcc"))
+    return bool(command) and shutil.which(command[0]) is not None
 
 
 @dataclass(frozen=True)

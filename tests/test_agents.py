@@ -372,6 +372,9 @@ def test_monte_carlo_cold_start_goes_through_the_pilot():
     assert agent.last_solve.success and len(calls) == 1
     assert agent._pilot is not None and agent._pilot.estimator.samples == 40
     assert agent.last_solve.iterations > agent._pilot.last_solve.iterations > 0
+    first = agent.last_solve.action.copy()
+    agent.reset()  # the pilot's draws restart too: the same first step again
+    np.testing.assert_array_equal(agent.predict(obs)[0], first)
     direct = SMPC(scenario, risk="monte_carlo", samples=200, pilot_samples=None, seed=3)
     direct.predict(obs)
     assert direct.last_solve.success and direct._pilot is None
