@@ -25,9 +25,11 @@ The optimal control problem, in the order of the sections of :meth:`PathFollowin
   the subclass's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, and
-  the subclass's risk data (Monte Carlo draws). epsilon is a parameter, so agents that differ only
-  in their tolerance share one built solver (cached per process).
+- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, the
+  numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box, speed
+  bounds) and the subclass's risk data (Monte Carlo draws). Agents that differ only in their
+  tolerance or uncertainty level share one built (or compiled) solver (cached per process, and on
+  disk when compiled).
 - **Variants** of the same NLP, each built once: ``"general"``; ``"zero"`` (the subclass's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon (distance to the truncation box minus the distance
@@ -36,7 +38,15 @@ The optimal control problem, in the order of the sections of :meth:`PathFollowin
 - **Initial guess**: the previous solution shifted by one stage (inputs shifted, the last repeated,
   states re-simulated from the measurement) with its shifted multipliers. The first solve of an
   episode solves from each of a few rollouts (brake, track the path, reverse) and keeps the plan of
-  least cost.
+  least cost; a subclass may instead hand it the plan of a cheaper pilot problem
+  (:meth:`PathFollowingMPC._pilot_plan`, the Monte Carlo SMPC's 100-draw pilot), which did that.
+- **Compiled solvers** (``jit=True``): the same NLP is assembled once more in MX with the stage
+  functions (dynamics, pose cost, risk row) called rather than inlined, its functions (the NLP and
+  the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGenerator`, compiled
+  by ``$CC`` (gcc) at ``-O{jit_opt}`` into a shared library in a private temporary directory and
+  kept in ``jit_cache`` under a hash of the NLP, so later processes load it; nlpsol then runs from
+  the library. Nothing is written to the working directory and the process never changes
+  directory. Timings: ``python -m benchmarks.timing --jit`` and the README.
 
 Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
 Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
@@ -50,19 +60,20 @@ against 7.2 / 41 ms, neither with a failed solve. The two may settle in differen
 from __future__ import annotations
 
 import atexit
-import contextlib
 import dataclasses
 import functools
 import hashlib
 import math
 import os
+import shlex
 import shutil
+import subprocess
 import tempfile
 import time
 import warnings
 from collections import OrderedDict
-from collections.abc import Iterator
 from dataclasses import dataclass, replace
+from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -90,14 +101,18 @@ FREE_MARGIN = 0.5
 DEFAULT_JIT_CACHE = os.environ.get(
     "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
 )
-"""Where jit-compiled solvers are kept between processes."""
+"""Where compiled solvers (shared libraries) are kept between processes."""
+_COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
+"""The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
 _CACHE_SIZE = 48
 _SOLVER_CACHE: OrderedDict[Any, _Problem] = OrderedDict()
 
 
 def have_c_compiler() -> bool:
-    """Whether CasADi's shell compiler (``$CC`` or ``gcc``) can be found."""
-    return shutil.which(os.environ.get("CC", "gcc")) is not None
+    """Whether the C compiler for compiled solvers (``$CC``, e.g. ``"ccache gcc"``, or ``gcc``) can
+    be found."""
+    command = shlex.split(os.environ.get("CC", "gcc"))
+    return bool(command) and shutil.which(command[0]) is not None
 
 
 @dataclass(frozen=True)
@@ -154,12 +169,17 @@ class PathFollowingMPC:
         risk_tolerance: epsilon [units of the severity], >= 0; overrides the scenario's.
         solver: one of :data:`SOLVERS`.
         stage_cost: one of :data:`STAGE_COSTS` (see :mod:`agents.mpc`).
-        jit: compile the NLP's functions with CasADi's shell compiler at ``-O{jit_opt}``; falls
-            back to no jit (with a warning) when no C compiler exists or compilation fails. Off by
-            default: compiling the exact risk's Hessian takes one to two minutes per NLP (see
-            :attr:`build_time`); the evaluations then run 2-4x faster.
-        jit_cache: directory where compiled solvers are kept (serialized with the binary
-            embedded) and reused by later processes; ``None`` compiles every time. Default:
+        jit: run the solver on compiled code (see "Compiled solvers" in :mod:`agents.mpc`); falls
+            back to the uncompiled solver (with a warning) when no C compiler exists or code
+            generation, compilation or loading fails. Off by default: the first build compiles
+            (the exact SMPC's three variants, shared by every uncertainty level and tolerance, in
+            about 40 s at -O1 on the project's machine; see :attr:`build_time`), later builds load
+            the cached library in well under a second; the evaluations then run about twice as
+            fast.
+        jit_opt: the C compiler's optimisation level (``-O1`` runs as fast as ``-O3`` here and
+            compiles in about 60 % of its time; ``-O0`` is no faster than uncompiled).
+        jit_cache: directory where compiled solvers (shared libraries) are kept and reused by later
+            processes; ``None``: a per-process temporary directory. Default:
             ``$RISKMPC_JIT_CACHE`` or ``~/.cache/riskcrossing/jit``.
         tol, max_iter: solver tolerance and iteration limit.
         warm_start: start from the shifted previous solution (IPOPT: with its multipliers).
@@ -333,6 +353,11 @@ class PathFollowingMPC:
         epsilon = 0 (only with :attr:`ZERO_TOLERANCE_VARIANT`)."""
         raise NotImplementedError
 
+    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
+        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, and
+        the solver iterations that took; None: start from the rollouts."""
+        return None
+
     def _risk_data(self, beliefs: Belief) -> np.ndarray:
         """Per-step risk data ``(N, *shape)`` for one solve (Monte Carlo: fresh draws)."""
         return np.zeros((self.horizon, 0, 0))
@@ -350,7 +375,7 @@ class PathFollowingMPC:
             key = (
                 type(self).__name__,
                 variant,
-                self.scenario.replace(risk_tolerance=0.0),
+                _problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.solver_name,
                 self.stage_cost,
@@ -416,48 +441,113 @@ class PathFollowingMPC:
         N, dt, path, ego = sc.horizon, sc.dt, sc.path, sc.ego
         w_c1, w_c2, w_th, w_v = sc.cost_weights
 
-        # --- parameters: object measurement, epsilon, per-step risk data; the object's beliefs
-        p_obj = ca.SX.sym("object", 5)
-        p_eps = ca.SX.sym("epsilon")
-        p_data = [ca.SX.sym(f"risk_data_{n}", *self._risk_parameter_shape()) for n in range(1, N + 1)]
-        p = ca.vertcat(p_obj, p_eps, *(ca.vec(d) for d in p_data))
-        beliefs = predict(sc, p_obj, steps=N, ops=CASADI)
-        fields = [f.name for f in dataclasses.fields(Belief)]
-        belief_fn = ca.Function(
-            "beliefs", [p_obj], [ca.vertcat(*(ca.horzcat(*(getattr(b, k) for k in fields)) for b in beliefs))]
-        )
-
-        # --- stage functions: ego model with the timing law, pose error
+        # --- stage functions: ego model with the timing law, pose error, the risk row
         x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
         pose_next = casadi_step(x[0:3], u[0:2], dt)
         lam_next = timing_law(path, x[3], x[2], u[2], dt, CASADI)
         f = ca.Function("f", [x, u], [ca.vertcat(pose_next, lam_next, u[0], u[1])])
         e1, e2, e3, _ = path_error(path, x[0], x[1], x[2], 0.0, x[3], ego.v_ref, CASADI, wrap=False)
         pose_cost = ca.Function("pose_cost", [x], [w_c1 * e1**2 + w_c2 * e2**2 + w_th * e3**2])
+        risk = None
+        if variant != "free":
+            ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
+            eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *self._risk_parameter_shape())
+            margin = self._margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, variant == "zero")
+            # only the ego state is a variable: no derivatives for the rest (compiled code: less)
+            risk = ca.Function(
+                "risk",
+                [ego_s, belief_s, eps_s, data_s],
+                [margin],
+                {"is_diff_in": [True, False, False, False]},
+            )
+        stages = {"f": f, "pose_cost": pose_cost, "risk": risk}
+
+        # --- the NLP in SX, every stage function inlined (what the solver runs uncompiled)
+        nlp, layout, belief_fn = self._assemble(ca.SX, variant, stages)
+        w_tags, g_tags, lbg, ubg = layout
+        p = nlp["p"]
+
+        # --- solver
+        options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
+        options.update(self._plugin_options())
+        if self.solver_name == "fatrop":
+            options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
+        jit = self.jit and have_c_compiler()
+        if self.jit and not jit:
+            warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=4)
+        solver = ca.nlpsol("mpc", self.solver_name, nlp, options)
+        if jit:
+            # the same NLP in MX, the stage functions called rather than inlined: the generated C
+            # code holds the risk row and its derivatives once instead of N times
+            calls, *_ = self._assemble(ca.MX, variant, stages)
+            compiled = self._compiled_solver(calls, {**options, "expand": False})
+            jit = compiled is not None
+            solver = compiled if jit else solver
+
+        index = {tag: i for i, tag in enumerate(w_tags)}
+        return _Problem(
+            variant=variant,
+            solver=solver,
+            evaluate=ca.Function("evaluate", [nlp["x"], p], [nlp["f"], nlp["g"]]),
+            rollout=f.mapaccum(N),
+            beliefs=belief_fn,
+            lbg=np.array(lbg),
+            ubg=np.array(ubg),
+            x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
+            u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
+            risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+            w_tags=tuple(w_tags),
+            shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
+            g_tags=tuple(g_tags),
+            build_time=time.perf_counter() - t0,
+            jit=jit,
+        )
+
+    def _assemble(
+        self, sym: type, variant: str, stages: dict[str, ca.Function | None]
+    ) -> tuple[dict[str, Any], tuple[list, list, list, list], ca.Function]:
+        """The NLP of :meth:`_build` with symbols of type ``sym`` (``ca.SX``: the stage functions
+        inlined; ``ca.MX``: called), its layout ``(w_tags, g_tags, lbg, ubg)`` and the beliefs'
+        function."""
+        sc = self.scenario
+        N, ego = sc.horizon, sc.ego
+        w_v = sc.cost_weights[3]
+        f, pose_cost, risk = stages["f"], stages["pose_cost"], stages["risk"]
+
+        # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
+        # share one solver), per-step risk data; the object's beliefs
+        p_obj = sym.sym("object", 5)
+        p_eps = sym.sym("epsilon")
+        p_unc = sym.sym("uncertainty", len(_uncertainty_vector(sc)))
+        p_data = [sym.sym(f"risk_data_{n}", *self._risk_parameter_shape()) for n in range(1, N + 1)]
+        p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
+        beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=_symbolic_uncertainty(p_unc))
+        fields = [f.name for f in dataclasses.fields(Belief)]
+        stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
+        belief_fn = ca.Function("beliefs", [p_obj, p_unc], [ca.horzcat(*stacked).T])
 
         # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
-        X = [ca.SX.sym(f"x_{n}", NX) for n in range(N + 1)]
-        U = [ca.SX.sym(f"u_{n}", NU) for n in range(N)]
-        w: list[ca.SX] = []
+        X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
+        U = [sym.sym(f"u_{n}", NU) for n in range(N)]
+        w: list[Any] = []
         w_tags: list[tuple[int, str, int]] = []
-        g: list[ca.SX] = []
+        g: list[Any] = []
         g_tags: list[tuple[int, str, int]] = []
         lbg: list[float] = []
         ubg: list[float] = []
 
-        def add_g(expr: ca.SX, lo: float, hi: float, stage: int, kind: str) -> None:
+        def add_g(expr: Any, lo: float, hi: float, stage: int, kind: str) -> None:
+            g.append(expr)
             for i in range(expr.numel()):
-                g.append(expr[i])
                 g_tags.append((stage, kind, i))
                 lbg.append(lo)
                 ubg.append(hi)
 
         def add_risk(n: int) -> None:
-            if variant == "free":
+            if risk is None:
                 return
             ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-            margin = self._margin(ego_n, beliefs[n], p_eps, p_data[n - 1], variant == "zero")
-            add_g(margin, 0.0, math.inf, n, "risk")
+            add_g(risk(ego_n, stacked[n], p_eps, p_data[n - 1]), 0.0, math.inf, n, "risk")
 
         # --- objective, dynamics, rate limits and risk, stage-wise
         cost = 0.0
@@ -474,86 +564,60 @@ class PathFollowingMPC:
         w.append(X[N])
         w_tags += [(N, "x", i) for i in range(NX)]
         add_risk(N)
-
-        # --- solver
         nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
-        options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
-        options.update(self._plugin_options())
-        if self.solver_name == "fatrop":
-            options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
-        jit = self.jit and have_c_compiler()
-        if self.jit and not jit:
-            warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=4)
-        solver = None
-        if jit:
-            solver = self._jit_solver(nlp, options)
-            jit = solver is not None
-        if solver is None:
-            solver = ca.nlpsol("mpc", self.solver_name, nlp, options)
+        return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
 
-        index = {tag: i for i, tag in enumerate(w_tags)}
-        return _Problem(
-            variant=variant,
-            solver=solver,
-            evaluate=ca.Function("evaluate", [nlp["x"], p], [cost, nlp["g"]]),
-            rollout=f.mapaccum(N),
-            beliefs=belief_fn,
-            lbg=np.array(lbg),
-            ubg=np.array(ubg),
-            x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
-            u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
-            risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
-            w_tags=tuple(w_tags),
-            shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
-            g_tags=tuple(g_tags),
-            build_time=time.perf_counter() - t0,
-            jit=jit,
-        )
+    def _compiled_solver(self, nlp: dict[str, Any], options: dict[str, Any]) -> ca.Function | None:
+        """The solver of ``nlp`` with its functions (the NLP and the derivatives the solver
+        evaluates) compiled into a shared library, loaded from the disk cache when it holds this
+        exact NLP.
 
-    def _jit_solver(self, nlp: dict[str, ca.SX], options: dict[str, Any]) -> ca.Function | None:
-        """The solver with jit-compiled functions, from the disk cache when it holds this exact NLP
-        (keyed by a hash of the serialized NLP, the options and the CasADi version)."""
-        jit_options = {
-            "jit": True,
-            "compiler": "shell",
-            "jit_cleanup": False,
-            "jit_serialize": "embed",
-            "jit_options": {
-                "compiler": os.environ.get("CC", "gcc"),
-                "flags": [f"-O{self.jit_opt}"],
-                "verbose": False,
-                "cleanup": False,
-            },
-        }
-        path = None
-        if self.jit_cache is not None:
-            definition = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
-            digest = hashlib.sha256(
-                "\n".join(
-                    [ca.__version__, self.solver_name, repr(options), repr(jit_options), definition]
-                ).encode()
-            ).hexdigest()[:32]
-            path = os.path.join(os.fspath(self.jit_cache), f"mpc_{digest}.casadi")
-            if os.path.exists(path):
-                try:
-                    return ca.Function.load(path)
-                except Exception as err:  # a stale or broken file: compile anew
-                    warnings.warn(f"could not load the jit cache {path} ({err}); compiling", stacklevel=5)
+        The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or
+        gcc) at ``-O{jit_opt}`` in a private temporary directory, then moved into ``jit_cache``
+        under a hash of the NLP, the CasADi version and the compiler flags, so any later process
+        (or agent) with the same NLP loads it in milliseconds. Nothing is written to the working
+        directory and the process never changes directory. (CasADi's own ``jit`` option, used
+        before, cannot promise that: in CasADi 3.8 nlpsol's jit writes its C source to the working
+        directory whatever ``jit_options["directory"]`` says, and only the object files follow
+        that option.) Returns None (with a warning) when code generation, compilation or loading
+        fails.
+        """
+        oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
+        solver = ca.nlpsol("mpc", self.solver_name, oracle, options)  # for its derivative functions
+        names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
+        compiler = os.environ.get("CC", "gcc")
+        flags = [f"-O{self.jit_opt}"]
+        key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
+        digest = hashlib.sha256("\n".join(key).encode()).hexdigest()[:24]
+        name = f"riskmpc_{digest}"
+        cache = _private_cache() if self.jit_cache is None else os.fspath(self.jit_cache)
+        library = os.path.join(cache, f"{name}.so")
         try:
-            with _jit_directory():  # CasADi writes its jit files to the working directory
-                solver = ca.nlpsol("mpc", self.solver_name, nlp, {**options, **jit_options})
+            if not os.path.exists(library):
+                os.makedirs(cache, exist_ok=True)
+                with tempfile.TemporaryDirectory(prefix="riskmpc_build_") as tmp:
+                    generator = ca.CodeGenerator(name, {"with_header": False})
+                    generator.add(oracle)
+                    for n in names:
+                        generator.add(solver.get_function(n))
+                    source = generator.generate(tmp + os.sep)
+                    built = os.path.join(tmp, f"{name}.so")
+                    subprocess.run(
+                        [*shlex.split(compiler), "-fPIC", "-shared", *flags, source, "-o", built],
+                        cwd=tmp,
+                        check=True,
+                        capture_output=True,
+                    )
+                    partial = f"{library}.{os.getpid()}.tmp"
+                    shutil.move(built, partial)
+                    os.replace(partial, library)  # atomic: no process loads a half-written library
+            # the oracle is the library's compiled "nlp": nothing left to expand
+            loaded = {k: v for k, v in options.items() if k != "expand"}
+            return ca.nlpsol("mpc", self.solver_name, library, loaded)
         except Exception as err:  # a broken compiler must not break the agent
-            warnings.warn(f"jit compilation failed ({err}); building without jit", stacklevel=5)
+            detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]
+            warnings.warn(f"compiling the solver failed ({err} {detail}); building without jit", stacklevel=5)
             return None
-        if path is not None:
-            try:
-                os.makedirs(os.path.dirname(path), exist_ok=True)
-                tmp = f"{path}.{os.getpid()}.tmp"
-                solver.save(tmp)
-                os.replace(tmp, path)
-            except OSError as err:
-                warnings.warn(f"could not write the jit cache {path} ({err})", stacklevel=5)
-        return solver
 
     # ------------------------------------------------------------------ one step
     def _measured_state(self, o: ob.Observation) -> np.ndarray:
@@ -694,11 +758,14 @@ class PathFollowingMPC:
             mem = None
         x0 = self._measured_state(o)
         base = self._problem("free")
-        future = Belief.from_array(np.asarray(base.beliefs(o.object_measurement))[1:])
+        uncertainty = _uncertainty_vector(sc)
+        future = Belief.from_array(np.asarray(base.beliefs(o.object_measurement, uncertainty))[1:])
         variant = self._risk_variant() if self._risk_possible(x0, future) else "free"
         pr = self._problem(variant)
         data = self._risk_data(future)
-        p = np.concatenate([o.object_measurement, [self._epsilon], *(d.ravel(order="F") for d in data)])
+        p = np.concatenate(
+            [o.object_measurement, [self._epsilon], uncertainty, *(d.ravel(order="F") for d in data)]
+        )
         lbx, ubx = self._bounds(pr, x0)
         lbg = pr.lbg.copy()
         lbg[pr.risk_rows] = self.backoff
@@ -710,14 +777,22 @@ class PathFollowingMPC:
         iterations, status, ok, out, timings, t_solver = 0, "not solved", False, {}, {}, 0.0
         best: tuple[dict[str, np.ndarray], str, dict[str, float]] | None = None
         cold: list[np.ndarray] | None = None
-        for attempt in range(int(warm) + self.cold_starts):
+        planned = None if warm else self._pilot_plan(index, obs_vec, variant)
+        pilot = None
+        if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
+            inputs, iterations = planned
+            pilot = self._pack(pr, self._rollout(pr, x0, inputs), inputs)
+        for attempt in range(int(warm or pilot is not None) + self.cold_starts):
             if warm and attempt == 0:
                 w0, lam_x, lam_g = self._warm_guess(pr, mem, x0)
+            elif pilot is not None and attempt == 0:
+                w0, lam_x, lam_g = pilot, None, None
             else:
                 cold = self._cold_guesses(pr, x0, p, lbg) if cold is None else cold
-                if attempt - int(warm) >= len(cold):
+                skip = int(warm or pilot is not None)
+                if attempt - skip >= len(cold):
                     break
-                w0, lam_x, lam_g = cold[attempt - int(warm)], None, None
+                w0, lam_x, lam_g = cold[attempt - skip], None, None
             args = {"x0": w0, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": pr.ubg, "p": p}
             if lam_x is not None:
                 args.update(lam_x0=lam_x, lam_g0=lam_g)
@@ -727,7 +802,7 @@ class PathFollowingMPC:
             iterations += iters
             if ok and (best is None or out["f"][0] < best[0]["f"][0]):
                 best = (out, status, timings)
-            if ok and not first:
+            if ok and (not first or (pilot is not None and attempt == 0)):
                 break
         retried = best is not None and attempt > 0 and not first
         ok = best is not None
@@ -809,14 +884,42 @@ class PathFollowingMPC:
         return bool(np.hypot(*(o.ego_pose[:2] - mem["predicted"])) > 1.0)
 
 
-@contextlib.contextmanager
-def _jit_directory() -> Iterator[None]:
-    """Run the block in a fresh temporary directory (removed when the interpreter exits)."""
-    tmp = tempfile.mkdtemp(prefix="riskmpc_jit_")
-    atexit.register(shutil.rmtree, tmp, ignore_errors=True)
-    cwd = os.getcwd()
-    os.chdir(tmp)
-    try:
-        yield
-    finally:
-        os.chdir(cwd)
+@functools.cache
+def _private_cache() -> str:
+    """A per-process directory for compiled solvers when ``jit_cache=None`` (removed at exit)."""
+    path = tempfile.mkdtemp(prefix="riskmpc_jit_")
+    atexit.register(shutil.rmtree, path, ignore_errors=True)
+    return path
+
+
+_UNCERTAINTY_FIELDS = (
+    ("sigma0", 3),
+    ("sigma_growth", 3),
+    ("box_half_width0", 2),
+    ("box_growth", 3),
+    ("velocity_bounds0", 2),
+)
+
+
+def _uncertainty_vector(scenario: Scenario) -> np.ndarray:
+    """The scenario's :class:`~risk_env.scenario.Uncertainty` as the solver's parameter vector."""
+    u = scenario.uncertainty
+    return np.concatenate([np.asarray(getattr(u, name), float) for name, _ in _UNCERTAINTY_FIELDS])
+
+
+def _symbolic_uncertainty(p: ca.SX) -> SimpleNamespace:
+    """An uncertainty whose numbers are the entries of ``p`` (as :func:`_uncertainty_vector` lays
+    them out), for :func:`risk_env.predict`."""
+    out, i = {}, 0
+    for name, length in _UNCERTAINTY_FIELDS:
+        out[name] = tuple(p[i + k] for k in range(length))
+        i += length
+    return SimpleNamespace(**out)
+
+
+def _problem_key(scenario: Scenario) -> tuple[Any, ...]:
+    """What of the scenario is built into a solver: all but epsilon and the uncertainty."""
+    skip = ("risk_tolerance", "uncertainty")
+    return tuple(
+        (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
+    )

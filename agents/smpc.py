@@ -13,9 +13,9 @@ from risk_env.prediction import Belief
 from risk_env.risk import ExactRisk, MonteCarloRisk, WorstCaseRisk
 from risk_env.scenario import Scenario
 
-FAR = 20.0
-"""Offset [m] per axis beyond which a Monte Carlo draw is moved in to FAR (for smoothing 0.05 m; it
-scales with the smoothing): its smoothed indicator is exp(-340) either way."""
+CLEARANCE_SOFTNESS = 0.05
+"""Temperature [m] of the soft minimum over the Monte Carlo draws' distances (the clearance): below
+the nearest distance by at most ``CLEARANCE_SOFTNESS * log(J)`` (0.31 m for J = 500)."""
 
 
 class SMPC(PathFollowingMPC):
@@ -26,27 +26,37 @@ class SMPC(PathFollowingMPC):
     ``risk="monte_carlo"``: the paper's estimator, :class:`risk_env.risk.MonteCarloRisk`, over
     ``samples`` draws per step n (default: the scenario's J = 500), drawn once per solve from the
     agent's own generator (``seed``; common random numbers across the solver's iterations,
-    reproducible after :meth:`reset`) and passed as parameters; the indicator is a logistic of
-    width ``smoothing`` [m]. The reported risk re-evaluates the plan with the hard indicator on
-    the same draws.
+    reproducible after :meth:`reset`) and passed as parameters. The solver sees the estimator's
+    smoothed CasADi form (a logistic indicator of width ``bandwidth`` times the draws' spread, the
+    severity's kinks rounded by ``severity_smoothing``; see :class:`~risk_env.risk.MonteCarloRisk`
+    for the forms and their bias); ``smoothing`` [m] fixes the width instead. The reported risk
+    re-evaluates the plan with the hard indicator on the same draws.
 
-    The constraint is written ``max(clearance, (epsilon - R)/scale) >= backoff``, and
+    The exact risk's constraint is written ``max(clearance, (epsilon - R)/scale) >= backoff``, and
     ``clearance >= backoff`` alone at epsilon = 0 (the core's ``"zero"`` variant). The clearance is
     the distance from the ego centre to where the object may be, minus ``r_e + r_o``: to the
     truncation box for the exact risk; to the draws for Monte Carlo, as a smooth soft minimum of
-    the distances, below the nearest by at most ``smoothing * log(J)`` (0.31 m for J = 500). R
-    vanishes wherever the clearance is positive, so this is R <= epsilon; but R's gradient vanishes
-    with R, and R <= 0 has no interior, which stalls an interior-point solver, while the clearance
-    keeps a gradient (and a truncated Gaussian puts ~1e-20 of mass near a box edge ten sigmas out:
-    the unguarded exact constraint would let the plan into the box at epsilon = 0). So at
-    epsilon = 0 the exact SMPC is the RMPC's box constraint, as it must be (P = 0 off the box), and
-    the Monte Carlo SMPC keeps off every draw (it differs from the RMPC by the tails its draws
-    miss).
+    the distances, below the nearest by at most :data:`CLEARANCE_SOFTNESS` ``* log(J)`` (0.31 m for
+    J = 500). R vanishes wherever the clearance is positive, so this is R <= epsilon; but R's
+    gradient vanishes with R, and R <= 0 has no interior, which stalls an interior-point solver,
+    while the clearance keeps a gradient (and a truncated Gaussian puts ~1e-20 of mass near a box
+    edge ten sigmas out: the unguarded exact constraint would let the plan into the box at
+    epsilon = 0). So at epsilon = 0 the exact SMPC is the RMPC's box constraint, as it must be
+    (P = 0 off the box), and the Monte Carlo SMPC keeps off every draw (it differs from the RMPC by
+    the tails its draws miss). The Monte Carlo SMPC at epsilon > 0 asks ``(epsilon - R)/scale >=
+    backoff`` alone: its smoothed R is never exactly 0, so the constraint has an interior, and the
+    clearance could only matter for tolerances below the logistic's tails (a few J); it doubled
+    the cost of an evaluation.
 
-    Monte Carlo in the solver is hard going: with J = 500 draws and a 0.05 m logistic the risk is a
-    staircase of ~5 J steps over the plane (the draws lie ~0.4 m apart), and the paper's severity
-    adds a kink per draw in the ego speed; expect many more iterations than with the exact risk,
-    and occasional fallbacks.
+    Monte Carlo in the solver: with a fixed 0.05 m logistic the risk was a staircase of single
+    draws where they are sparse (500 draws with sigma = 6 m lie ~0.1 m apart near the disc edge),
+    and the paper's severity has a kink per draw in the ego speed, right where the SMPC puts it
+    (kinetic energies matched): the solver cycled between kinks and failed on 2 of the paper's
+    closed-loop steps. The spread-proportional width and the rounded severity halve the iterations
+    and remove those failures. An episode's first step (a cold start) first solves the same SMPC
+    with ``pilot_samples`` draws (default 100) from every rollout and then the full problem once,
+    from the pilot's plan: about a third of the cost of three full cold solves. ``pilot_samples=None``
+    solves the full problem from every rollout.
 
     The severity model is the scenario's (``scenario.severity``). See
     :class:`agents.mpc.PathFollowingMPC` for the problem, solver options and the fallback (shifted
@@ -61,67 +71,102 @@ class SMPC(PathFollowingMPC):
         scenario: Scenario,
         risk: str = "exact",
         samples: int | None = None,
-        smoothing: float = 0.05,
+        bandwidth: float = 0.05,
+        smoothing: float | None = None,
+        severity_smoothing: float = 0.05,
+        pilot_samples: int | None = 100,
         **kwargs: Any,
     ) -> None:
         if risk not in self.RISK_METHODS:
             raise ValueError(f"unknown SMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
-        if samples is not None and (isinstance(samples, bool) or int(samples) != samples or samples < 1):
-            raise ValueError(f"samples must be an integer >= 1, got {samples!r}")
+        for name, value in (("samples", samples), ("pilot_samples", pilot_samples)):
+            if value is not None and (isinstance(value, bool) or int(value) != value or value < 1):
+                raise ValueError(f"{name} must be an integer >= 1 (or None), got {value!r}")
         self.risk_method = risk
+        self.pilot_samples = pilot_samples
+        self._pilot: SMPC | None = None
         self._box = WorstCaseRisk(scenario)
         if risk == "exact":
             self.estimator = ExactRisk(scenario)
         else:
-            self.estimator = MonteCarloRisk(scenario, samples=samples, smoothing=smoothing)
+            self.estimator = MonteCarloRisk(
+                scenario,
+                samples=samples,
+                bandwidth=bandwidth,
+                smoothing=smoothing,
+                severity_smoothing=severity_smoothing,
+            )
         super().__init__(scenario, **kwargs)
+        if risk == "monte_carlo" and pilot_samples and pilot_samples < self.estimator.samples:
+            est = self.estimator
+            options = {k: v for k, v in kwargs.items() if k not in ("risk_tolerance", "seed")}
+            self._pilot = SMPC(
+                scenario,
+                risk="monte_carlo",
+                samples=pilot_samples,
+                bandwidth=est.bandwidth,
+                smoothing=est.smoothing,
+                severity_smoothing=est.severity_smoothing,
+                pilot_samples=None,
+                seed=None if self.seed is None else self.seed + 1,
+                **options,
+            )
+            self.build_time += self._pilot.build_time
 
     @property
     def samples(self) -> int | None:
         """J, the Monte Carlo draws per step (None for the exact risk)."""
         return getattr(self.estimator, "samples", None)
 
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        if getattr(self, "_pilot", None) is not None:  # its draws restart too
+            self._pilot.reset(None if seed is None else seed + 1)
+
     def _estimator_key(self) -> tuple[Any, ...]:
         if self.risk_method == "exact":
             return ("exact",)
-        return ("monte_carlo", self.estimator.samples, self.estimator.smoothing)
+        est = self.estimator
+        return ("monte_carlo", est.samples, est.bandwidth, est.smoothing, est.severity_smoothing)
 
     def _risk_parameter_shape(self) -> tuple[int, int]:
         return (self.estimator.samples, 3) if self.risk_method == "monte_carlo" else (0, 0)
 
     def _margin(self, ego: ca.SX, belief: Belief, epsilon: ca.SX, data: ca.SX, zero: bool) -> ca.SX:
         if self.risk_method == "monte_carlo":
+            if not zero:
+                # (epsilon - R) / scale alone: with epsilon > 0 the smoothed R <= epsilon has an
+                # interior and a gradient wherever a draw is near the disc edge, and the
+                # clearance's alternative (disc off every draw) could only matter were epsilon
+                # below the few joules of the logistic's tails, so it is left out (it doubled the
+                # cost of an evaluation)
+                return self.estimator.casadi_margin(ego, belief, epsilon, samples=data)
             # soft minimum of the distances to the draws: smooth, and below the minimum by at most
-            # smoothing * log(J), so clearance >= 0 keeps the disc off every draw
-            dx, dy = ego[0] - data[:, 0], ego[1] - data[:, 1]
-            dist = ca.sqrt(dx * dx + dy * dy + 1e-12)
-            t = self.estimator.smoothing
-            nearest = ca.mmin(dist)  # shift for a safe exponent; the soft minimum's value and
-            soft = nearest - t * ca.log(
-                ca.sum1(ca.exp(-(dist - nearest) / t))
-            )  # gradient do not depend on it
-            clearance = soft - self.estimator.radius
-        else:
-            clearance = self._box.distance(ego, belief, CASADI) - self._box.radius
+            # CLEARANCE_SOFTNESS * log(J), so clearance >= 0 keeps the disc off every draw
+            dist = self.estimator.distances(ego, data)
+            t = CLEARANCE_SOFTNESS
+            nearest = ca.mmin(dist)  # shift for a safe exponent; the value and gradient do not depend on it
+            return nearest - t * ca.log(ca.sum1(ca.exp(-(dist - nearest) / t))) - self.estimator.radius
+        clearance = self._box.distance(ego, belief, CASADI) - self._box.radius
         if zero:  # R <= 0 <=> the disc misses every possible object position (box / draws)
             return clearance
-        if self.risk_method == "monte_carlo":
-            margin = self.estimator.casadi_margin(ego, belief, epsilon, samples=self._near(ego, data))
-        else:
-            margin = self.estimator.casadi_margin(ego, belief, epsilon)
-        return ca.fmax(clearance, margin)  # R <= epsilon <=> clearance >= 0 or margin >= 0
+        # R <= epsilon <=> clearance >= 0 or margin >= 0
+        return ca.fmax(clearance, self.estimator.casadi_margin(ego, belief, epsilon))
 
-    def _near(self, ego: ca.SX, data: ca.SX) -> ca.SX:
-        """The draws with their offset from the ego clipped to +-:data:`FAR` per axis.
-
-        MonteCarloRisk's logistic ``1 / (1 + exp((d - r) / smoothing))`` overflows (and its
-        derivative turns NaN) for draws more than ~700 smoothing widths beyond the disc; draws that
-        far contribute nothing, so moving them to FAR changes no value and keeps the gradients
-        finite.
-        """
-        reach = FAR * self.estimator.smoothing / 0.05
-        near = [ego[i] + ca.fmin(ca.fmax(data[:, i] - ego[i], -reach), reach) for i in range(2)]
-        return ca.horzcat(*near, data[:, 2])
+    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
+        """Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
+        ``pilot_samples`` draws, itself solved cold from every rollout (its evaluations cost a
+        fifth). At epsilon = 0 (``"zero"``) a plan that misses 100 draws may run into the other
+        400 (a solve from it took longer than the rollouts), so that variant starts from them."""
+        if self._pilot is None or variant != "general":
+            return None
+        self._pilot.risk_tolerance = self._epsilon
+        self._pilot._memory.pop(index, None)  # a cold start: every rollout, keep the best
+        report = self._pilot._step(index, obs_vec)
+        self._pilot.last_solve = report
+        if report.fallback is not None:
+            return None
+        return np.column_stack([report.inputs, report.path_speed]), report.iterations
 
     def _risk_data(self, beliefs: Belief) -> np.ndarray:
         if self.risk_method != "monte_carlo":

@@ -13,10 +13,12 @@ the slowest step), the time to build the solvers, and per configuration e_acc, d
 steps taken. Targets on the project's 2-core machine (median / p95): RMPC and exact SMPC 5 / 15 ms,
 Monte Carlo SMPC (J = 500) 40 / 80 ms, no failed solve.
 
-``--jit`` compiles the NLPs (CasADi's shell compiler, ``-O1``): one to two minutes per uncertainty
-level for the exact SMPC, several for Monte Carlo, paid once per machine (compiled solvers are kept
-in ``$RISKMPC_JIT_CACHE``, default ``~/.cache/riskcrossing/jit``); the "build" time printed is what
-this run spent building and compiling. Timings on a shared machine are noisy: run it alone.
+``--jit`` runs the solvers on compiled code (generated C, ``$CC`` at ``-O1``; see
+:mod:`agents.mpc`): about 40 s for the exact SMPC's three solvers, shared by every uncertainty level
+and tolerance, paid once per machine (the libraries are kept in ``$RISKMPC_JIT_CACHE``, default
+``~/.cache/riskcrossing/jit``); the "build" time printed is what this run spent building and
+compiling. The Monte Carlo SMPC's code (500 draws per step) would take many minutes to compile and
+meets its target without. Timings on a shared machine are noisy: run it alone.
 """
 
 from __future__ import annotations

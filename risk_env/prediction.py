@@ -96,14 +96,17 @@ def predict(
     measurement: Any,
     steps: int | None = None,
     ops: Ops = NUMPY,
+    uncertainty: Any = None,
 ) -> list[Belief]:
     """Beliefs for n = 0..steps (default: the horizon N) from ``measurement``.
 
     ``measurement``: ``(c1 [m], c2 [m], theta [rad], v [m/s], omega [rad/s])``, a sequence of
-    5 floats, arrays (batched) or CasADi scalars.
+    5 floats, arrays (batched) or CasADi scalars. ``uncertainty``: the scenario's unless given,
+    any object with the fields of :class:`~risk_env.scenario.Uncertainty` (the MPC passes CasADi
+    parameters, so that one built solver serves every uncertainty level).
     """
     steps = scenario.horizon if steps is None else steps
-    u = scenario.uncertainty
+    u = scenario.uncertainty if uncertainty is None else uncertainty
     x, y, th, v, w = (measurement[i] for i in range(5))
     out = []
     for n in range(steps + 1):

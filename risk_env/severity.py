@@ -31,6 +31,12 @@ class Severity(ABC):
     def value(self, v_e: Any, th_e: Any, v_o: Any, th_o: Any, ops: Ops) -> Any:
         """s at ego speed ``v_e`` and object speed ``v_o``."""
 
+    def smooth_value(self, v_e: Any, th_e: Any, v_o: Any, th_o: Any, ops: Ops, width: float) -> Any:
+        """s with its kinks rounded for a gradient-based solver: between ``value`` and
+        ``value + width`` [units of s], equal to ``value`` for ``width = 0``. Models that are smooth
+        already return ``value``."""
+        return self.value(v_e, th_e, v_o, th_o, ops)
+
     @abstractmethod
     def expected(self, v_e: Any, th_e: Any, belief: Any, ops: Ops) -> Any:
         """E[s] over the belief's truncated-Gaussian speed."""
@@ -59,6 +65,13 @@ class PaperSeverity(Severity):
 
     def value(self, v_e, th_e, v_o, th_o, ops):
         return 0.5 * ops.abs(self.m_e * v_e * v_e - self.m_o * v_o * v_o)
+
+    def smooth_value(self, v_e, th_e, v_o, th_o, ops, width):
+        # 0.5 |z| -> 0.5 sqrt(z^2 + (2 width)^2): above 0.5 |z| by at most width, at z = 0
+        if width <= 0:
+            return self.value(v_e, th_e, v_o, th_o, ops)
+        z = self.m_e * v_e * v_e - self.m_o * v_o * v_o
+        return 0.5 * ops.sqrt(z * z + 4.0 * width * width)
 
     def expected(self, v_e, th_e, belief, ops):
         # Split |c^2 - V^2| at V = +-c, c = sqrt(m_e/m_o)|v_e|, and use truncated moments:

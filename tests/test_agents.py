@@ -108,7 +108,7 @@ def test_one_solve_from_the_paper_start(make, estimator: str, epsilon: float) ->
 
 def test_monte_carlo_plan_respects_its_own_draws() -> None:
     """The plan's Monte Carlo risk on the solve's draws (hard indicator) stays within epsilon, up to
-    the smoothed indicator's width: a draw within a few ``smoothing`` of the disc edge may count."""
+    the smoothed form's stated bound (draws near the disc edge, the rounded severity)."""
     scenario = Scenario.preset("medium", risk_tolerance=1000.0)
     agent = SMPC(scenario, risk="monte_carlo", samples=200, seed=3)
     obs = start_observation(scenario)
@@ -117,6 +117,12 @@ def test_monte_carlo_plan_respects_its_own_draws() -> None:
     assert report.success
     per_draw = 0.5 * 1000.0 * 5.0**2 / 200  # one draw's largest contribution at |v| <= 5 m/s [J]
     assert np.all(report.risk <= 1000.0 + 2 * per_draw), report.risk
+    beliefs = predict_array(scenario, ob.split(obs).object_measurement)[1:]
+    ego = np.column_stack([report.ego_trajectory[1:], report.inputs[:, 0]])
+    draws = report.risk_fn.args[2]  # (N, J, 3): the draws this solve used
+    for n in range(scenario.horizon):
+        bound = agent.estimator.smoothing_bound(ego[n], beliefs[n], draws[n])
+        assert report.risk[n] <= 1000.0 + float(bound) + 1e-6
 
 
 # ----------------------------------------------------------------------------- RMPC boxes
@@ -266,6 +272,7 @@ def test_monte_carlo_draws_are_reproducible() -> None:
         (lambda sc: SMPC(sc, risk="worst_case"), "'worst_case'"),
         (lambda sc: SMPC(sc, risk="monte_carlo", samples=0), "samples.*0"),
         (lambda sc: SMPC(sc, risk="monte_carlo", samples=-3), "samples.*-3"),
+        (lambda sc: SMPC(sc, risk="monte_carlo", pilot_samples=0.5), "pilot_samples"),
         (lambda sc: RMPC(sc, solver="snopt"), "'snopt'"),
         (lambda sc: SMPC(sc, stage_cost="terminal"), "'terminal'"),
         (lambda sc: RMPC(sc, max_iter=0), "max_iter"),
@@ -304,6 +311,95 @@ def test_jit_falls_back_without_a_compiler(monkeypatch) -> None:
     assert not agent.compiled
     agent.predict(start_observation(agent.scenario))
     assert agent.last_solve.success
+
+
+def test_compiled_solver_writes_nothing_to_the_working_directory(tmp_path, monkeypatch):
+    """The compiled (jit) build: its C source and library go to a private temporary directory and
+    the cache, never to the working directory, and it never changes directory (not thread-safe)."""
+    work, cache = tmp_path / "work", tmp_path / "cache"
+    work.mkdir()
+    monkeypatch.chdir(work)
+
+    def no_chdir(path):
+        raise AssertionError(f"os.chdir({path!r}) during a build")
+
+    monkeypatch.setattr("os.chdir", no_chdir)
+    scenario = Scenario.preset("low", horizon=2)
+    agent = RMPC(scenario, jit=True, jit_opt=0, jit_cache=cache)
+    assert agent.compiled
+    assert list(work.iterdir()) == []
+    libraries = sorted(p.name for p in cache.iterdir())
+    assert len(libraries) == 2 and all(n.startswith("riskmpc_") and n.endswith(".so") for n in libraries)
+    obs = start_observation(scenario)
+    action, _ = agent.predict(obs)
+    plain = RMPC(scenario)
+    np.testing.assert_allclose(action, plain.predict(obs)[0], atol=1e-6)
+    assert agent.last_solve.iterations == plain.last_solve.iterations
+    # a new process (here: the in-process solver cache emptied) loads the libraries, compiles nothing
+    from agents import mpc
+
+    monkeypatch.setattr(mpc, "_SOLVER_CACHE", type(mpc._SOLVER_CACHE)())
+    monkeypatch.setattr(mpc.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
+    again = RMPC(scenario, jit=True, jit_opt=0, jit_cache=cache)
+    assert again.compiled and sorted(p.name for p in cache.iterdir()) == libraries
+    np.testing.assert_allclose(again.predict(obs)[0], action, atol=1e-9)
+    assert list(work.iterdir()) == []
+
+
+def test_compiled_solver_falls_back_when_the_compiler_fails(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("CC", "false")  # found on PATH, fails every compilation
+    with pytest.warns(UserWarning, match="compiling the solver failed"):
+        agent = RMPC(Scenario.preset("low", horizon=2), jit=True, jit_cache=tmp_path / "cache")
+    assert not agent.compiled
+    agent.predict(start_observation(agent.scenario))
+    assert agent.last_solve.success
+    assert [p.name for p in tmp_path.iterdir()] in ([], ["cache"])
+    assert not any((tmp_path / "cache").glob("*")) if (tmp_path / "cache").exists() else True
+
+
+def test_monte_carlo_cold_start_goes_through_the_pilot():
+    """An episode's first Monte Carlo step: the pilot (fewer draws) solves from every rollout, the
+    full problem once from the pilot's plan."""
+    scenario = Scenario.preset("medium", risk_tolerance=1000.0)
+    obs = start_observation(scenario)
+    agent = SMPC(scenario, risk="monte_carlo", samples=200, pilot_samples=40, seed=3)
+    calls = []
+    original = agent._call
+    monkeypatch_call = lambda pr, args: calls.append(pr.variant) or original(pr, args)  # noqa: E731
+    agent._call = monkeypatch_call
+    agent.predict(obs)
+    assert agent.last_solve.success and len(calls) == 1
+    assert agent._pilot is not None and agent._pilot.estimator.samples == 40
+    assert agent.last_solve.iterations > agent._pilot.last_solve.iterations > 0
+    first = agent.last_solve.action.copy()
+    agent.reset()  # the pilot's draws restart too: the same first step again
+    np.testing.assert_array_equal(agent.predict(obs)[0], first)
+    direct = SMPC(scenario, risk="monte_carlo", samples=200, pilot_samples=None, seed=3)
+    direct.predict(obs)
+    assert direct.last_solve.success and direct._pilot is None
+    np.testing.assert_allclose(agent.last_solve.inputs, direct.last_solve.inputs, atol=0.05)
+
+
+def test_uncertainty_levels_and_tolerances_share_one_solver():
+    """Epsilon and the uncertainty are solver parameters: one build serves them all, and each agent
+    still plans against its own beliefs."""
+    from agents import mpc
+
+    mpc._SOLVER_CACHE.clear()
+    first = SMPC(Scenario.preset("low", risk_tolerance=500.0))
+    assert first.build_time > 0
+    levels = ("medium", "high")
+    others = [SMPC(Scenario.preset(level, risk_tolerance=eps)) for level in levels for eps in (250.0, 1000.0)]
+    assert all(agent.build_time == 0.0 for agent in others)
+    assert SMPC(Scenario.preset("low", risk_tolerance=0.0)).build_time > 0  # the epsilon = 0 form
+    assert SMPC(Scenario.preset("high", risk_tolerance=0.0)).build_time == 0.0
+    for agent in (first, others[1], others[3]):  # low 500, medium 1000, high 1000
+        obs = start_observation(agent.scenario)
+        agent.predict(obs)
+        risk = plan_risk(agent, agent.scenario, obs, "exact")
+        assert agent.last_solve.success and np.all(risk <= agent.risk_tolerance + RISK_TOLERANCE_J)
+        np.testing.assert_allclose(agent.last_solve.risk, risk, rtol=1e-9, atol=1e-9)
 
 
 def test_agents_with_different_estimators_share_a_process():

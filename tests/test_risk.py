@@ -194,11 +194,85 @@ def test_smoothed_monte_carlo_tends_to_the_hard_indicator():
     hard = float(make_estimator("monte_carlo", s).risk(ego, b, draws=draws))
     e, d = ca.SX.sym("e", 4), ca.SX.sym("d", 2000, 3)
     errors = []
-    for width in (0.2, 0.05, 0.005):
-        est = make_estimator("monte_carlo", s, smoothing=width)
+    for bandwidth, severity_smoothing in ((0.2, 0.2), (0.05, 0.05), (0.002, 0.001)):
+        est = make_estimator("monte_carlo", s, bandwidth=bandwidth, severity_smoothing=severity_smoothing)
         f = ca.Function("f", [e, d], [est.casadi_risk(e, b, samples=d)])
         errors.append(abs(float(f(ego, draws)) - hard))
-    assert hard > 0 and errors[0] > errors[2] and errors[2] < 0.02 * hard
+    assert hard > 0 and errors[0] > errors[2] and errors[2] < 0.005 * hard
+    fixed = make_estimator("monte_carlo", s, smoothing=0.005, severity_smoothing=0.0)  # the fixed width
+    f = ca.Function("f", [e, d], [fixed.casadi_risk(e, b, samples=d)])
+    assert abs(float(f(ego, draws)) - hard) < 0.02 * hard
+
+
+@pytest.mark.parametrize("preset", ["low", "medium", "high"])
+@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+def test_smoothed_monte_carlo_within_its_stated_bound_of_the_hard_estimator(preset, severity):
+    """The solver's form against the paper's (numpy, hard indicator) on the same draws: within
+    ``smoothing_bound`` everywhere, and the bound is small where the draws are dense."""
+    s = Scenario.preset(preset, severity=severity)
+    beliefs = predict_array(s, MEASUREMENT)
+    est = make_estimator("monte_carlo", s)
+    rng = np.random.default_rng(11)
+    e, d = ca.SX.sym("e", 4), ca.SX.sym("d", est.samples, 3)
+    for n in (1, 3, 6):
+        b = beliefs[n]
+        f = ca.Function("f", [e, d], [est.casadi_risk(e, b, samples=d)])
+        draws = b.sample(rng, est.samples)
+        # ego centres around the draws' cloud: inside, on the disc edge, outside
+        spread = float(np.sqrt(b.sigma_x * b.sigma_y)) + s.collision_distance
+        egos = np.column_stack(
+            [
+                rng.normal(b.x, spread, 200),
+                rng.normal(b.y, spread, 200),
+                rng.uniform(-3, 3, 200),
+                rng.uniform(-4, 8, 200),
+            ]
+        )
+        smooth = np.array(f.map(len(egos))(egos.T, draws)).ravel()
+        hard = est.risk(egos, b, draws=draws)
+        bound = est.smoothing_bound(egos, b, draws)
+        assert np.all(np.abs(smooth - hard) <= bound + 1e-9), np.max(np.abs(smooth - hard) - bound)
+        assert np.all(smooth >= 0)
+        worst = float(np.max(est.severity.value(egos[:, 3], 0.0, draws[:, 2, None], b.theta, NUMPY)))
+        assert np.median(bound) <= 0.05 * worst + est.severity_width
+
+
+def test_smoothed_monte_carlo_bias_in_expectation_is_small():
+    """Many draws: the smoothed estimator is within MC noise plus its O(bandwidth^2) bias of the
+    exact risk (the expectation the paper's estimator estimates)."""
+    s, b = belief("medium", 3)
+    exact = make_estimator("exact", s)
+    est = make_estimator("monte_carlo", s, samples=40000)
+    draws = b.sample(np.random.default_rng(5), est.samples)
+    e, d = ca.SX.sym("e", 4), ca.SX.sym("d", est.samples, 3)
+    f = ca.Function("f", [e, d], [est.casadi_risk(e, b, samples=d)])
+    for dx, dy, v in ((0.0, 0.0, 4.0), (3.5, 1.0, 3.0), (-2.0, 4.0, 2.5), (5.0, 3.0, 6.0)):
+        ego = np.array([float(b.x) + dx, float(b.y) + dy, 0.3, v])
+        hard = float(est.risk(ego, b, draws=draws))
+        smooth = float(f(ego, draws))
+        reference = float(exact.risk(ego, b))
+        noise = (
+            3
+            * np.std(
+                (np.hypot(ego[0] - draws[:, 0], ego[1] - draws[:, 1]) <= est.radius)
+                * est.severity.value(v, 0.3, draws[:, 2], b.theta, NUMPY)
+            )
+            / np.sqrt(est.samples)
+        )
+        assert abs(hard - reference) <= noise + 1.0
+        assert abs(smooth - reference) <= noise + 0.01 * max(reference, 100.0) + est.severity_width
+
+
+@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+def test_smooth_severity_lies_within_its_width_above_the_severity(severity):
+    from risk_env.severity import make_severity
+
+    model = make_severity(Scenario(severity=severity))
+    v_e, v_o = np.meshgrid(np.linspace(-4, 8, 61), np.linspace(-6, 6, 61))
+    value = model.value(v_e, 0.2, v_o, 1.0, NUMPY)
+    np.testing.assert_array_equal(model.smooth_value(v_e, 0.2, v_o, 1.0, NUMPY, 0.0), value)
+    smooth = model.smooth_value(v_e, 0.2, v_o, 1.0, NUMPY, 50.0)
+    assert np.all(smooth >= value - 1e-9) and np.all(smooth <= value + 50.0 + 1e-9)
 
 
 def test_worst_case_margin_relaxes_when_tolerance_exceeds_worst_severity():
@@ -220,6 +294,10 @@ def test_bad_arguments():
         make_estimator("monte_carlo", s).risk(np.zeros(4), predict_array(s, MEASUREMENT)[1])
     with pytest.raises(ValueError, match="samples"):
         make_estimator("monte_carlo", s, samples=0)
+    with pytest.raises(ValueError, match="bandwidth"):
+        make_estimator("monte_carlo", s, bandwidth=0.0)
+    with pytest.raises(ValueError, match="severity_smoothing"):
+        make_estimator("monte_carlo", s, severity_smoothing=-1.0)
     with pytest.raises(ValueError, match="last axis of 4"):
         make_estimator("exact", s).risk(np.zeros(3), predict_array(s, MEASUREMENT)[1])
 
