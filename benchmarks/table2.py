@@ -211,10 +211,12 @@ def markdown(
 ) -> str:
     lines = ["# Table II: ours beside the paper's", ""]
     lines.append("Each cell: ours (paper). e_acc = sum of ||e_k||; d_min [m]. `*` marks a collision.")
-    groups = sorted({(r["method"], r["risk_method"]) for r in rows}, key=lambda g: (g[0], g[1]))
+    order = {"RMPC": 0, "SMPC": 1, "PPO": 2}  # the paper's two, then the learned baseline
+    groups = sorted({(r["method"], r["risk_method"]) for r in rows}, key=lambda g: (order[g[0]], g[1]))
     levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
     for method, risk in groups:
-        lines += ["", f"## {method}, risk: {risk}", ""]
+        kind = "training" if method == "PPO" else "risk"
+        lines += ["", f"## {method}, {kind}: {risk}", ""]
         header = "| eps | " + " | ".join(f"{lv} e_acc | {lv} d_min" for lv in levels) + " |"
         lines += [header, "|" + " --- |" * (1 + 2 * len(levels))]
         for eps in sorted({r["epsilon"] for r in rows}):
