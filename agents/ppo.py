@@ -15,7 +15,6 @@ Needs the ``rl`` extra (``pip install "riskcrossing[rl]"``: torch CPU and stable
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -162,11 +161,9 @@ class PPOAgent:
         deterministic: bool = True,
     ) -> tuple[np.ndarray, None]:
         """Inputs for ``observation (15,)`` or ``(B, 15)``; raises on a wrong shape or a NaN."""
-        start = time.perf_counter()
         obs, single = as_batch(observation, layout.SIZE)
         if not np.all(np.isfinite(obs)):
             raise ValueError(f"observation has non-finite entries: {observation}")
         action, _ = self.model.predict(features(obs), deterministic=deterministic)
         inputs = to_inputs(action, obs[:, layout.EGO_INPUT], self.limits)
-        self.predict_time = time.perf_counter() - start
         return (inputs[0] if single else inputs), None

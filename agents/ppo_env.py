@@ -83,12 +83,8 @@ class SB3VecEnv(VecEnv):
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         obs, reward, terminated, truncated, info = self.env.step(self._actions)
         done = terminated | truncated
-        final = info.get("final_info", {})
-
-        def last(key: str, i: int) -> Any:
-            return final[key][i] if done[i] else info[key][i]
-
-        cost = np.array([last("cost", i) for i in range(self.num_envs)])
+        final = info.get("final_info", info)  # an ended copy's last step is in final_info
+        cost = np.where(done, final["cost"], info["cost"])
         self._episode_cost += cost
         infos: list[dict[str, Any]] = []
         for i in range(self.num_envs):
@@ -97,8 +93,8 @@ class SB3VecEnv(VecEnv):
                 item.update(
                     terminal_observation=info["final_obs"][i],
                     episode_cost=float(self._episode_cost[i]),
-                    collision=bool(last("collision", i)),
-                    is_success=bool(last("is_success", i)),
+                    collision=bool(final["collision"][i]),
+                    is_success=bool(final["is_success"][i]),
                 )
                 item["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
                 self._episode_cost[i] = 0.0

@@ -130,9 +130,8 @@ def make_callbacks(args: Args) -> list[Any]:
         """Logs the episodes finished in each rollout: cost, collision and goal rates, beta; with
         ``lagrangian`` it then steps beta toward the cost limit (dual ascent)."""
 
-        def __init__(self, lagrangian: bool) -> None:
+        def __init__(self) -> None:
             super().__init__()
-            self.lagrangian = lagrangian
             self.episodes: list[dict[str, float]] = []
             self.history: list[dict[str, float]] = []
 
@@ -146,7 +145,7 @@ def make_callbacks(args: Args) -> list[Any]:
 
         def _on_rollout_end(self) -> None:
             beta = float(self.training_env.get_attr("reward_risk_weight")[0])
-            if not self.lagrangian and self.num_timesteps >= args.penalty_warmup and beta != args.risk_weight:
+            if not args.lagrangian and self.num_timesteps >= args.penalty_warmup and beta != args.risk_weight:
                 beta = args.risk_weight  # the warm-up is over: the fixed penalty switches on
                 self.training_env.set_attr("reward_risk_weight", beta)
             if not self.episodes:
@@ -156,13 +155,13 @@ def make_callbacks(args: Args) -> list[Any]:
             self.logger.record("risk/collision_rate", stats["collision"])
             self.logger.record("risk/goal_rate", stats["is_success"])
             self.logger.record("risk/beta", beta)
-            if self.lagrangian:
+            if args.lagrangian:
                 beta = max(0.0, beta + args.dual_lr * (stats["episode_cost"] - args.cost_limit))
                 self.training_env.set_attr("reward_risk_weight", beta)
             self.history.append({**stats, "beta": beta, "timesteps": float(self.num_timesteps)})
             self.episodes = []
 
-    callbacks: list[Any] = [RiskStats(args.lagrangian)]
+    callbacks: list[Any] = [RiskStats()]
     if args.checkpoint_every > 0:
         every = max(args.checkpoint_every // args.num_envs, 1)
         callbacks.append(
@@ -208,7 +207,7 @@ def train(args: Args) -> dict[str, Any]:
     history = callbacks[0].history
     metadata = {
         "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(args).items()},
-        "limits": dataclasses.asdict(InputLimits.of(venv.venv.venv.env.unwrapped.base_scenario)),
+        "limits": dataclasses.asdict(InputLimits.of(venv.get_attr("base_scenario")[0])),
         "features": FEATURES,
         "timesteps": int(model.num_timesteps),
         "wall_time_s": round(wall, 1),

@@ -136,7 +136,7 @@ class Renderer:
         if self.mode == "human":
             self._show()
             return None
-        return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surf), (1, 0, 2)))
+        return frame_array(surf)
 
     def _disc(self, x: float, y: float, theta: float, radius: float, colour: tuple[int, int, int]) -> None:
         centre = self._to_px(x, y)
@@ -182,6 +182,11 @@ def make_renderer(kind: str, scenario: Scenario, mode: str, fps: float, estimato
     if kind == "basic":
         return Renderer(scenario, mode, fps)
     raise ValueError(f"unknown renderer {kind!r}; expected 'auto', 'highway' or 'basic'")
+
+
+def frame_array(surface: pygame.Surface) -> np.ndarray:
+    """The surface's pixels as ``(H, W, 3)`` uint8."""
+    return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surface), (1, 0, 2)))
 
 
 def _blend(a: tuple[int, int, int], b: tuple[int, int, int], t: float) -> tuple[int, int, int]:

@@ -163,7 +163,7 @@ class RiskEstimator(ABC):
 
 SCALAR_LOOP_MAX = 4
 """Up to this many states near the box, :class:`ExactRisk` integrates them one by one with the
-scalar kernel (about 30 us each) rather than with the batch kernel (about 250 us fixed cost)."""
+scalar kernel rather than the batch kernel, whose fixed cost exceeds a few scalar calls."""
 
 
 class ExactRisk(RiskEstimator):

@@ -159,7 +159,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         terminated = active & (seen.collision | seen.goal)
         truncated = active & (self._steps >= s.max_steps)
         infos = self._infos(seen, risk, stepped=active)
-        rewards = np.where(active, sum(infos["rewards"][k] for k in ("path_error", "risk")), 0.0)
+        rewards = infos["rewards"]["path_error"] + infos["rewards"]["risk"]  # 0 where not stepped
         done = terminated | truncated
         obs = seen.obs
         if mode == AutoresetMode.SAME_STEP and done.any():

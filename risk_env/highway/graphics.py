@@ -36,7 +36,7 @@ from highway_env.vehicle.kinematics import Vehicle  # noqa: E402
 
 from risk_env.path import point  # noqa: E402
 from risk_env.prediction import Belief, predict, predict_array  # noqa: E402
-from risk_env.rendering import BEYOND_GOAL, SIZE, Renderer, _blend  # noqa: E402
+from risk_env.rendering import BEYOND_GOAL, SIZE, Renderer, _blend, frame_array  # noqa: E402
 from risk_env.scenario import Scenario  # noqa: E402
 
 EGO = VehicleGraphics.EGO_COLOR
@@ -277,8 +277,3 @@ def render_scene(
         draw_disc(world, highlight[0], highlight[1], highlight[2], BOX_NEAR)
     draw_text(world, status, pygame.font.Font(None, 20))
     return frame_array(world)
-
-
-def frame_array(surface: pygame.Surface) -> np.ndarray:
-    """The surface's pixels as ``(H, W, 3)`` uint8."""
-    return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surface), (1, 0, 2)))
