@@ -22,6 +22,7 @@ from risk_env import dynamics, observation
 from risk_env.ops import NUMPY
 from risk_env.path import project
 from risk_env.prediction import predict
+from risk_env.renderers import RENDERERS, make_renderer
 from risk_env.risk import RiskEstimator, make_estimator
 from risk_env.scenario import OVERRIDES, Scenario
 from risk_env.transition import move_object, observe, reward_terms
@@ -31,7 +32,6 @@ ENV_ID = "RiskCrossing-v0"
 OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
 """How the object moves: ``"paper"`` (deterministic unicycle) or ``"sampled"`` (one draw per step
 from the prediction model)."""
-RENDERERS: tuple[str, ...] = ("auto", "highway", "basic")
 """Who draws: highway-env's graphics, the basic pygame view, or ``"auto"`` (highway-env's if installed)."""
 ACTION_TOLERANCE = 1e-6
 """Actions may exceed the Box by this much [m/s, rad/s] (float32 rounding); they are applied as given."""
@@ -351,8 +351,6 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             return None
         self._require_reset()
         if self._renderer is None:
-            from risk_env.rendering import make_renderer
-
             fps = self.metadata["render_fps"]
             self._renderer = make_renderer(
                 self.renderer, self.scenario, self.render_mode, fps, self.estimator.name

@@ -1,5 +1,5 @@
-"""The basic top view of ``RiskCrossing-v0`` with pygame (pygame-ce), and the env's choice of renderer
-(:func:`make_renderer`; highway-env's graphics live in :mod:`risk_env.highway.graphics`).
+"""The basic top view of ``RiskCrossing-v0`` with pygame (pygame-ce). The env chooses between it and
+highway-env's graphics (:mod:`risk_env.highway.graphics`) in :mod:`risk_env.renderers`.
 
 Drawn: the reference path (solid up to the goal, thin beyond it), the goal, the object's
 predicted truncation boxes and means over the horizon (:func:`risk_env.predict` from its current
@@ -12,7 +12,6 @@ window and needs a display.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import os
 from collections.abc import Sequence
@@ -113,7 +112,7 @@ class Renderer:
         # The object's predicted truncation boxes and means, n = 1..N (near: dark).
         beliefs = predict(s, object_measurement)[1:]
         for n, b in reversed(list(enumerate(beliefs, start=1))):
-            colour = _blend(BOX_NEAR, BOX_FAR, (n - 1) / max(len(beliefs) - 1, 1))
+            colour = blend(BOX_NEAR, BOX_FAR, (n - 1) / max(len(beliefs) - 1, 1))
             corner = self._to_px(float(b.x) - float(b.half_x), float(b.y) + float(b.half_y))
             size = (2 * float(b.half_x) * self._scale, 2 * float(b.half_y) * self._scale)
             rect = pygame.Rect(*corner.tolist(), max(size[0], 1.0), max(size[1], 1.0))
@@ -169,25 +168,11 @@ class Renderer:
             self._screen = None
 
 
-def make_renderer(kind: str, scenario: Scenario, mode: str, fps: float, estimator: str = "exact") -> Renderer:
-    """The env's renderer: ``kind`` is ``"basic"`` (:class:`Renderer`), ``"highway"``
-    (:class:`risk_env.highway.graphics.HighwayRenderer`, needs highway-env) or ``"auto"`` (highway
-    when highway-env can be imported); ``estimator`` names the env's risk estimator."""
-    if kind == "auto":
-        kind = "highway" if importlib.util.find_spec("highway_env") is not None else "basic"
-    if kind == "highway":
-        from risk_env.highway.graphics import HighwayRenderer  # an ImportError says how to install
-
-        return HighwayRenderer(scenario, mode, fps, estimator=estimator)
-    if kind == "basic":
-        return Renderer(scenario, mode, fps)
-    raise ValueError(f"unknown renderer {kind!r}; expected 'auto', 'highway' or 'basic'")
-
-
 def frame_array(surface: pygame.Surface) -> np.ndarray:
     """The surface's pixels as ``(H, W, 3)`` uint8."""
     return np.ascontiguousarray(np.transpose(pygame.surfarray.array3d(surface), (1, 0, 2)))
 
 
-def _blend(a: tuple[int, int, int], b: tuple[int, int, int], t: float) -> tuple[int, int, int]:
+def blend(a: tuple[int, int, int], b: tuple[int, int, int], t: float) -> tuple[int, int, int]:
+    """The colour a fraction ``t`` of the way from ``a`` to ``b``."""
     return tuple(int(round((1 - t) * ca + t * cb)) for ca, cb in zip(a, b, strict=True))

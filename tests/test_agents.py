@@ -336,7 +336,7 @@ def test_compiled_solver_writes_nothing_to_the_working_directory(tmp_path, monke
     np.testing.assert_allclose(action, plain.predict(obs)[0], atol=1e-6)
     assert agent.last_solve.iterations == plain.last_solve.iterations
     # a new process (here: the in-process solver cache emptied) loads the libraries, compiles nothing
-    from agents import mpc
+    from agents import solver as mpc
 
     monkeypatch.setattr(mpc, "_SOLVER_CACHE", type(mpc._SOLVER_CACHE)())
     monkeypatch.setattr(mpc.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
@@ -384,7 +384,7 @@ def test_monte_carlo_cold_start_goes_through_the_pilot():
 def test_uncertainty_levels_and_tolerances_share_one_solver():
     """Epsilon and the uncertainty are solver parameters: one build serves them all, and each agent
     still plans against its own beliefs."""
-    from agents import mpc
+    from agents import solver as mpc
 
     mpc._SOLVER_CACHE.clear()
     first = SMPC(Scenario.preset("low", risk_tolerance=500.0))

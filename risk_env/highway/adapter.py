@@ -7,7 +7,7 @@
 highway-env env with an SB3-style policy drives it.
 
 **The reference path.** The MPC core follows one constant-curvature arc, a
-:class:`~risk_env.scenario.ReferencePath` (:mod:`agents.mpc` builds its problem from it). The
+:class:`~risk_env.scenario.ReferencePath` (:mod:`agents.ocp` builds its problem from it). The
 controlled vehicle's route is a chain of highway-env lanes, each straight (curvature 0) or circular
 (curvature 1/radius), so each lane *is* such an arc, exactly (:class:`RoutePath`). The adapter keeps
 one agent per lane of the route, built on the scenario re-posed on that lane (same numbers,

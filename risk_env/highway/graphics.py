@@ -36,7 +36,7 @@ from highway_env.vehicle.kinematics import Vehicle  # noqa: E402
 
 from risk_env.path import point  # noqa: E402
 from risk_env.prediction import Belief, predict, predict_array  # noqa: E402
-from risk_env.rendering import BEYOND_GOAL, SIZE, Renderer, _blend, frame_array  # noqa: E402
+from risk_env.rendering import BEYOND_GOAL, SIZE, Renderer, blend, frame_array  # noqa: E402
 from risk_env.scenario import Scenario  # noqa: E402
 
 EGO = VehicleGraphics.EGO_COLOR
@@ -102,7 +102,7 @@ def draw_beliefs(surface: WorldSurface, beliefs: Sequence[Belief]) -> None:
     """Truncation boxes and means of beliefs n = 1..N (near: dark orange, far: pale)."""
     count = len(beliefs)
     for n, b in reversed(list(enumerate(beliefs))):
-        colour = _blend(BOX_NEAR, BOX_FAR, n / max(count - 1, 1))
+        colour = blend(BOX_NEAR, BOX_FAR, n / max(count - 1, 1))
         x, y, hx, hy = float(b.x), float(b.y), float(b.half_x), float(b.half_y)
         (u0, w0), (u1, w1) = surface.vec2pix((x - hx, y - hy)), surface.vec2pix((x + hx, y + hy))
         rect = pygame.Rect(min(u0, u1), min(w0, w1), max(abs(u1 - u0), 1), max(abs(w1 - w0), 1))
@@ -114,7 +114,7 @@ def draw_samples(surface: WorldSurface, draws: np.ndarray) -> None:
     """Monte Carlo draws ``(J, N, 3)`` of (c1, c2, v) as dots, coloured by prediction step."""
     steps = draws.shape[1]
     for n in reversed(range(steps)):  # the nearest on top
-        colour = _blend(SAMPLE, BOX_FAR, n / max(steps - 1, 1))
+        colour = blend(SAMPLE, BOX_FAR, n / max(steps - 1, 1))
         for x, y in draws[:, n, :2]:
             pygame.draw.circle(surface, colour, surface.vec2pix((x, y)), 1)
 

@@ -1,0 +1,85 @@
+"""Initial guesses for the MPC's solver: rate-limited input ramps, simulated rollouts, and the
+cold-start candidates (brake, track the path, reverse), scored on the NLP itself."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agents.solver import Problem
+from risk_env.ops import NUMPY
+from risk_env.path import point, timing_law
+from risk_env.scenario import Scenario
+
+
+def rollout(problem: Problem, x0: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """States ``(N+1, NX)`` from ``x0`` under inputs ``(N, NU)``: the model f of the NLP."""
+    return np.vstack([x0, np.asarray(problem.rollout(x0, inputs.T)).T])
+
+
+def pack(problem: Problem, states: np.ndarray, inputs: np.ndarray) -> np.ndarray:
+    """States ``(N+1, NX)`` and inputs ``(N, NU)`` laid out as the NLP's variables w ``(n_w,)``."""
+    w = np.zeros(problem.n_w)
+    w[problem.x_index] = states
+    w[problem.u_index] = inputs
+    return w
+
+
+def ramp(start: float, target: float, rate: float, limit: tuple[float, float], steps: int) -> np.ndarray:
+    """``steps`` values moving from ``start`` toward ``target`` by at most ``rate`` per step, within
+    ``limit``."""
+    out, value = [], start
+    for _ in range(steps):
+        value = float(np.clip(np.clip(target, value - rate, value + rate), *limit))
+        out.append(value)
+    return np.array(out)
+
+
+def candidates(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
+    """Input sequences ``(N, NU)`` for a cold start from state ``x0`` ``(NX,)``: brake, track the
+    path (pure pursuit), reverse; each within the bounds and rate limits."""
+    ego, dt, path, N = scenario.ego, scenario.dt, scenario.path, scenario.horizon
+    dv, dw = ego.accel_max * dt, ego.omega_rate_max * dt
+    v_lim, w_lim = (ego.v_min, ego.v_max), (-ego.omega_max, ego.omega_max)
+    out = {}
+    for name, v_target in (("brake", 0.0), ("track", ego.v_ref), ("reverse", ego.v_min)):
+        v = ramp(x0[4], v_target, dv, v_lim, N)
+        if name == "track":  # pure pursuit of the path point a few metres ahead
+            omega, pose, lam, w_prev = [], x0[:3], x0[3], x0[5]
+            for vn in v:
+                px, py, _ = point(path, lam + max(4.0, 2.0 * abs(vn)))
+                bearing = math.atan2(py - pose[1], px - pose[0])
+                desired = 1.5 * float(NUMPY.wrap_angle(bearing - pose[2]))
+                w_prev = float(np.clip(np.clip(desired, w_prev - dw, w_prev + dw), *w_lim))
+                omega.append(w_prev)
+                lam = timing_law(path, lam, pose[2], vn, dt)
+                half = 0.5 * w_prev * dt
+                arc = vn * dt * float(NUMPY.sinc(half))
+                pose = np.array(
+                    [
+                        pose[0] + arc * math.cos(pose[2] + half),
+                        pose[1] + arc * math.sin(pose[2] + half),
+                        pose[2] + w_prev * dt,
+                    ]
+                )
+            omega = np.array(omega)
+        else:
+            omega = ramp(x0[5], 0.0, dw, w_lim, N)
+        out[name] = np.column_stack([v, omega, np.clip(v, *v_lim)])
+    return out
+
+
+def cold_guesses(
+    problem: Problem, scenario: Scenario, x0: np.ndarray, p: np.ndarray, lbg: np.ndarray
+) -> list[np.ndarray]:
+    """The :func:`candidates` rolled out and packed as w, best first: smallest constraint violation
+    (against ``lbg`` and the problem's ubg at parameters ``p``), then cost."""
+    scored = []
+    for inputs in candidates(scenario, x0).values():
+        w0 = pack(problem, rollout(problem, x0, inputs), inputs)
+        cost, g = problem.evaluate(w0, p)
+        g = np.asarray(g).ravel()
+        violation = np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0))
+        scored.append((float(violation), float(cost), len(scored), w0))
+    return [w0 for *_, w0 in sorted(scored, key=lambda s: s[:3])]

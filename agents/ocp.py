@@ -1,0 +1,212 @@
+"""The path-following optimal control problem (paper Secs. III-VI), written once as a CasADi NLP.
+
+The sections of :func:`assemble`, in order:
+
+- **Variables** (multiple shooting, stage-wise as fatrop expects): per stage n = 0..N the state
+  ``x_n = (c1, c2, theta, lambda, v_{n-1}, omega_{n-1})`` and per n = 0..N-1 the input
+  ``u_n = (v, omega, u2)``. The state carries the previous input so that the rate limits and the
+  risk's ego speed are stage-local. ``x_0`` is fixed by its bounds (lbx = ubx) to the measurement:
+  the ego pose (heading unwrapped near theta_P(lambda_k)), the last applied input and lambda_k, the
+  observation's closest-point progress.
+- **Dynamics**: the ego unicycle (:func:`risk_env.dynamics.casadi_step`) and the timing law
+  ``lambda_{n+1} = lambda_n + u2 cos(theta_n - theta_P(lambda_n)) T`` (:func:`risk_env.path.timing_law`).
+- **Objective**: ``sum e' W e``, ``e = (c1 - c1_P(lambda), c2 - c2_P(lambda), theta - theta_P(lambda),
+  u2 - v_ref)`` (:func:`risk_env.path.path_error` with the unwrapped heading), no terminal cost.
+  ``stage_cost="reached"`` (default) sums the pose part over the states n = 1..N that the inputs
+  reach and the speed part over u2_0..u2_{N-1}. The paper's sum over n = 0..N-1
+  (``stage_cost="paper"``) holds a constant pose term at n = 0 and leaves the last input
+  (v, omega)_{N-1} without any cost (it only moves x_N, which nothing weighs), so its optimum is not
+  unique there.
+- **Constraints**: ``v in [v_min, v_max]``, ``|omega| <= omega_max``; rate limits
+  ``|v_n - v_{n-1}| <= accel_max T``, ``|omega_n - omega_{n-1}| <= omega_rate_max T`` with
+  (v, omega)_{-1} the last applied input; ``u2 in [v_min, v_max]`` (the paper's u2 in V_e, the
+  ego's own speed set, so the reference point may wait or step back with a reversing ego);
+  ``lambda_n >= lambda_0`` (the path's start) and no upper cap (the path continues beyond the goal);
+  the agent's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
+  with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
+  step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
+- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, the
+  numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box, speed
+  bounds) and the agent's risk data (Monte Carlo draws). Agents that differ only in their
+  tolerance or uncertainty level share one built (or compiled) solver.
+- **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
+  form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
+  anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
+  problem has the same solution, at a fraction of the cost.
+
+The solver built on this NLP lives in :mod:`agents.solver`; the controller that calls it in
+:mod:`agents.mpc`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from types import SimpleNamespace
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from risk_env.dynamics import casadi_step
+from risk_env.ops import CASADI
+from risk_env.path import path_error, timing_law
+from risk_env.prediction import Belief, predict
+from risk_env.scenario import Scenario
+
+STAGE_COSTS: tuple[str, ...] = ("reached", "paper")
+VARIANTS: tuple[str, ...] = ("general", "zero", "free")
+NX = 6
+"""Stage state: c1 [m], c2 [m], theta [rad], lambda [m], previous v [m/s], previous omega [rad/s]."""
+NU = 3
+"""Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
+
+Margin = Callable[[ca.SX, Belief, ca.SX, ca.SX, bool], ca.SX]
+"""``(ego (4,), belief, epsilon, risk data, zero) -> margin``: >= 0 iff the step's risk bound holds."""
+Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
+"""``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
+
+
+def stage_functions(
+    scenario: Scenario, variant: str, margin: Margin, risk_shape: tuple[int, int]
+) -> dict[str, ca.Function | None]:
+    """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
+    ``pose_cost`` x -> the pose part of e' W e, and ``risk`` (ego, belief, epsilon, data) -> margin
+    (None for ``"free"``)."""
+    sc = scenario
+    dt, path, ego = sc.dt, sc.path, sc.ego
+    w_c1, w_c2, w_th, _ = sc.cost_weights
+    x, u = ca.SX.sym("x", NX), ca.SX.sym("u", NU)
+    pose_next = casadi_step(x[0:3], u[0:2], dt)
+    lam_next = timing_law(path, x[3], x[2], u[2], dt, CASADI)
+    f = ca.Function("f", [x, u], [ca.vertcat(pose_next, lam_next, u[0], u[1])])
+    e1, e2, e3, _ = path_error(path, x[0], x[1], x[2], 0.0, x[3], ego.v_ref, CASADI, wrap=False)
+    pose_cost = ca.Function("pose_cost", [x], [w_c1 * e1**2 + w_c2 * e2**2 + w_th * e3**2])
+    risk = None
+    if variant != "free":
+        ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
+        eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *risk_shape)
+        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, variant == "zero")
+        # only the ego state is a variable: no derivatives for the rest (compiled code: less)
+        risk = ca.Function(
+            "risk", [ego_s, belief_s, eps_s, data_s], [row], {"is_diff_in": [True, False, False, False]}
+        )
+    return {"f": f, "pose_cost": pose_cost, "risk": risk}
+
+
+def assemble(
+    sym: type,
+    scenario: Scenario,
+    stages: dict[str, ca.Function | None],
+    risk_shape: tuple[int, int],
+    stage_cost: str,
+) -> tuple[dict[str, Any], Layout, ca.Function]:
+    """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
+    called), its :data:`Layout` and the beliefs' function (object measurement (5,), uncertainty
+    numbers) -> ``(N+1, Belief.SIZE)``."""
+    sc = scenario
+    N, ego = sc.horizon, sc.ego
+    w_v = sc.cost_weights[3]
+    dv, dw = ego.accel_max * sc.dt, ego.omega_rate_max * sc.dt
+    f, pose_cost, risk = stages["f"], stages["pose_cost"], stages["risk"]
+
+    # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
+    # share one solver), per-step risk data; the object's beliefs
+    p_obj = sym.sym("object", 5)
+    p_eps = sym.sym("epsilon")
+    p_unc = sym.sym("uncertainty", len(uncertainty_vector(sc)))
+    p_data = [sym.sym(f"risk_data_{n}", *risk_shape) for n in range(1, N + 1)]
+    p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
+    beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(p_unc))
+    fields = [f.name for f in dataclasses.fields(Belief)]
+    stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
+    belief_fn = ca.Function("beliefs", [p_obj, p_unc], [ca.horzcat(*stacked).T])
+
+    # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
+    X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
+    U = [sym.sym(f"u_{n}", NU) for n in range(N)]
+    w: list[Any] = []
+    w_tags: list[tuple[int, str, int]] = []
+    g: list[Any] = []
+    g_tags: list[tuple[int, str, int]] = []
+    lbg: list[float] = []
+    ubg: list[float] = []
+
+    def add_g(expr: Any, lo: float, hi: float, stage: int, kind: str) -> None:
+        g.append(expr)
+        for i in range(expr.numel()):
+            g_tags.append((stage, kind, i))
+            lbg.append(lo)
+            ubg.append(hi)
+
+    def add_risk(n: int) -> None:
+        if risk is None:
+            return
+        ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
+        add_g(risk(ego_n, stacked[n], p_eps, p_data[n - 1]), 0.0, math.inf, n, "risk")
+
+    # --- objective, dynamics, rate limits and risk, stage-wise
+    cost = 0.0
+    for n in range(N):
+        w += [X[n], U[n]]
+        w_tags += [(n, "x", i) for i in range(NX)] + [(n, "u", i) for i in range(NU)]
+        add_g(X[n + 1] - f(X[n], U[n]), 0.0, 0.0, n, "gap")
+        add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
+        add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
+        if n >= 1:
+            add_risk(n)
+        cost += w_v * (U[n][2] - ego.v_ref) ** 2
+        cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
+    w.append(X[N])
+    w_tags += [(N, "x", i) for i in range(NX)]
+    add_risk(N)
+    nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
+    return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
+
+
+def variable_bounds(
+    scenario: Scenario, x_index: np.ndarray, u_index: np.ndarray, n_w: int, x0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(lbx, ubx)`` of w ``(n_w,)``: x_0 fixed to the measurement, lambda_n >= the path's start,
+    the input bounds."""
+    ego = scenario.ego
+    lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
+    lbx[x_index[0]] = ubx[x_index[0]] = x0
+    lbx[x_index[1:, 3]] = min(scenario.path.lambda_start, x0[3])
+    lbx[u_index] = (ego.v_min, -ego.omega_max, ego.v_min)
+    ubx[u_index] = (ego.v_max, ego.omega_max, ego.v_max)
+    return lbx, ubx
+
+
+_UNCERTAINTY_FIELDS = (
+    ("sigma0", 3),
+    ("sigma_growth", 3),
+    ("box_half_width0", 2),
+    ("box_growth", 3),
+    ("velocity_bounds0", 2),
+)
+
+
+def uncertainty_vector(scenario: Scenario) -> np.ndarray:
+    """The scenario's :class:`~risk_env.scenario.Uncertainty` as the solver's parameter vector (13,)."""
+    u = scenario.uncertainty
+    return np.concatenate([np.asarray(getattr(u, name), float) for name, _ in _UNCERTAINTY_FIELDS])
+
+
+def symbolic_uncertainty(p: Any) -> SimpleNamespace:
+    """An uncertainty whose numbers are the entries of ``p`` (as :func:`uncertainty_vector` lays
+    them out), for :func:`risk_env.predict`."""
+    out, i = {}, 0
+    for name, length in _UNCERTAINTY_FIELDS:
+        out[name] = tuple(p[i + k] for k in range(length))
+        i += length
+    return SimpleNamespace(**out)
+
+
+def problem_key(scenario: Scenario) -> tuple[Any, ...]:
+    """What of the scenario is built into a solver: all but epsilon and the uncertainty."""
+    skip = ("risk_tolerance", "uncertainty")
+    return tuple(
+        (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
+    )

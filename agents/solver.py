@@ -1,0 +1,320 @@
+"""Building the MPC's solver from the NLP of :mod:`agents.ocp`: options, compilation and caches.
+
+Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
+Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
+adaptive barrier, primal-dual warm start; IPOPT's "Solved To Acceptable Level" counts as a
+success). On the paper's 36 closed loops (``python -m benchmarks.timing``, 2 cores) fatrop took a
+median / p95 of 2.1 / 4.6 ms per RMPC step against IPOPT's 6.6 / 20 ms (IPOPT spends ~2.5 ms per
+call in MUMPS and its own set-up however small the problem), and 6.3 / 23 ms per exact-SMPC step
+against 7.2 / 41 ms, neither with a failed solve. The two may settle in different local optima.
+
+**Compiled solvers** (``jit=True``): the same NLP is assembled once more in MX with the stage
+functions (dynamics, pose cost, risk row) called rather than inlined, its functions (the NLP and
+the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGenerator`, compiled by
+``$CC`` (gcc) at ``-O{jit_opt}`` into a shared library in a private temporary directory and kept in
+``jit_cache`` under a hash of the NLP, so later processes load it; nlpsol then runs from the
+library. Nothing is written to the working directory and the process never changes directory.
+
+**Caches**: built problems are kept per process (:func:`cached_problem`, keyed by everything that
+changes the NLP or the solver), compiled libraries on disk.
+"""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import hashlib
+import os
+import shlex
+import shutil
+import subprocess
+import tempfile
+import time
+import warnings
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from agents.ocp import NU, NX, STAGE_COSTS, Margin, assemble, stage_functions
+from risk_env.scenario import Scenario
+
+SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
+IPOPT_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+DEFAULT_JIT_CACHE = os.environ.get(
+    "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
+)
+"""Where compiled solvers (shared libraries) are kept between processes."""
+_COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
+"""The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
+_CACHE_SIZE = 48
+_SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
+
+
+def have_c_compiler() -> bool:
+    """Whether the C compiler for compiled solvers (``$CC``, e.g. ``"ccache gcc"``, or ``gcc``) can
+    be found."""
+    command = shlex.split(os.environ.get("CC", "gcc"))
+    return bool(command) and shutil.which(command[0]) is not None
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How the NLP is solved; see :class:`agents.PathFollowingMPC` for each field."""
+
+    solver: str = "fatrop"
+    stage_cost: str = "reached"
+    jit: bool = False
+    jit_opt: int = 1
+    jit_cache: str | os.PathLike[str] | None = DEFAULT_JIT_CACHE
+    tol: float = 1e-4
+    max_iter: int = 150
+    warm_start: bool = True
+    solver_options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.solver not in SOLVERS:
+            raise ValueError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
+        if self.stage_cost not in STAGE_COSTS:
+            raise ValueError(f"unknown stage_cost {self.stage_cost!r}; expected one of {STAGE_COSTS}")
+        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
+            raise ValueError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
+        if not (isinstance(self.tol, (int, float)) and self.tol > 0):
+            raise ValueError(f"tol must be > 0, got {self.tol!r}")
+        object.__setattr__(self, "tol", float(self.tol))
+
+    def key(self) -> tuple[Any, ...]:
+        """What of the settings changes a built solver (not where compiled code is kept)."""
+        options = repr(sorted(self.solver_options.items()))
+        return (
+            self.solver,
+            self.stage_cost,
+            self.jit,
+            self.jit_opt,
+            self.tol,
+            self.max_iter,
+            self.warm_start,
+            options,
+        )
+
+    def plugin_options(self) -> dict[str, Any]:
+        """The nlpsol plugin's options (IPOPT's or fatrop's), the user's on top."""
+        extra = {k: v for k, v in self.solver_options.items() if k not in SOLVERS}
+        if self.solver == "ipopt":
+            ipopt = {
+                "print_level": 0,
+                "sb": "yes",
+                "tol": self.tol,
+                "constr_viol_tol": 1e-6,
+                "acceptable_tol": max(1e-3, 10 * self.tol),
+                "acceptable_constr_viol_tol": 1e-5,
+                "acceptable_iter": 5,
+                "max_iter": self.max_iter,
+                "mu_strategy": "adaptive",
+                "hessian_approximation": "exact",
+            }
+            if self.warm_start:
+                ipopt.update(
+                    warm_start_init_point="yes",
+                    warm_start_bound_push=1e-6,
+                    warm_start_mult_bound_push=1e-6,
+                    mu_init=1e-3,
+                )
+            ipopt.update(self.solver_options.get("ipopt", {}))
+            return {"ipopt": ipopt, **extra}
+        # CasADi 3.8's fatrop takes a primal initial guess only (no warm_start_* options); a small
+        # initial barrier and bound push suit that guess, the shifted previous solution
+        fatrop = {
+            "print_level": 0,
+            "tol": self.tol,
+            "constr_viol_tol": 1e-6,
+            "max_iter": self.max_iter,
+            "mu_init": 1e-3 if self.warm_start else 1e-1,
+            "bound_push": 1e-6 if self.warm_start else 1e-2,
+            "bound_frac": 1e-6 if self.warm_start else 1e-2,
+        }
+        fatrop.update(self.solver_options.get("fatrop", {}))
+        return {"structure_detection": "auto", "fatrop": fatrop, **extra}
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One built NLP variant: the solver, an evaluator and the index maps of its layout."""
+
+    variant: str
+    solver: ca.Function
+    evaluate: ca.Function
+    """(w, p) -> (objective, g): scores initial-guess candidates."""
+    rollout: ca.Function
+    """(x_0 (NX,), inputs (NU, N)) -> states (NX, N): the model f, accumulated."""
+    beliefs: ca.Function
+    """object measurement (5,) -> (N+1, 11) belief fields at n = 0..N (``Belief.as_array`` order)."""
+    lbg: np.ndarray
+    ubg: np.ndarray
+    x_index: np.ndarray
+    """(N+1, NX) positions of the states in w."""
+    u_index: np.ndarray
+    """(N, NU) positions of the inputs in w."""
+    risk_rows: np.ndarray
+    """Rows of g holding margin_n, n = 1..N (empty for ``"free"``)."""
+    w_tags: tuple[tuple[int, str, int], ...]
+    """(stage, kind, component) of every entry of w."""
+    shift_w: np.ndarray
+    """For each entry of w, the same entry one stage later (the last stage: itself)."""
+    g_tags: tuple[tuple[int, str, int], ...]
+    """(stage, kind, component) of every row of g: maps multipliers between variants and stages."""
+    build_time: float
+    """Seconds to build (and with jit compile) the solver."""
+    jit: bool
+    """Whether the solver's functions were compiled."""
+
+    @property
+    def n_w(self) -> int:
+        return len(self.w_tags)
+
+
+def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Problem:
+    """The process-wide problem under ``key``, built by ``build()`` on a miss (``build_time`` 0 on a
+    hit); the least recently used of more than 48 are dropped."""
+    if key in _SOLVER_CACHE:
+        _SOLVER_CACHE.move_to_end(key)
+        return replace(_SOLVER_CACHE[key], build_time=0.0)
+    problem = build()
+    _SOLVER_CACHE[key] = problem
+    while len(_SOLVER_CACHE) > _CACHE_SIZE:
+        _SOLVER_CACHE.popitem(last=False)
+    return problem
+
+
+def build_problem(
+    scenario: Scenario, variant: str, settings: SolverSettings, margin: Margin, risk_shape: tuple[int, int]
+) -> Problem:
+    """Build the NLP of :mod:`agents.ocp` for ``variant`` and its solver (compiled with
+    ``settings.jit`` where a C compiler works)."""
+    t0 = time.perf_counter()
+    N = scenario.horizon
+    stages = stage_functions(scenario, variant, margin, risk_shape)
+    # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
+    nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost
+    )
+
+    options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
+    options.update(settings.plugin_options())
+    if settings.solver == "fatrop":
+        options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
+    jit = settings.jit and have_c_compiler()
+    if settings.jit and not jit:
+        warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=5)
+    solver = ca.nlpsol("mpc", settings.solver, nlp, options)
+    if jit:
+        # the same NLP in MX, the stage functions called rather than inlined: the generated C
+        # code holds the risk row and its derivatives once instead of N times
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost)
+        compiled = compiled_solver(calls, {**options, "expand": False}, settings)
+        jit = compiled is not None
+        solver = compiled if jit else solver
+
+    index = {tag: i for i, tag in enumerate(w_tags)}
+    return Problem(
+        variant=variant,
+        solver=solver,
+        evaluate=ca.Function("evaluate", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]),
+        rollout=stages["f"].mapaccum(N),
+        beliefs=belief_fn,
+        lbg=np.array(lbg),
+        ubg=np.array(ubg),
+        x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
+        u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
+        risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+        w_tags=tuple(w_tags),
+        shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
+        g_tags=tuple(g_tags),
+        build_time=time.perf_counter() - t0,
+        jit=jit,
+    )
+
+
+def compiled_solver(
+    nlp: dict[str, Any], options: dict[str, Any], settings: SolverSettings
+) -> ca.Function | None:
+    """The solver of ``nlp`` with its functions (the NLP and the derivatives the solver evaluates)
+    compiled into a shared library, loaded from the disk cache when it holds this exact NLP.
+
+    The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or gcc) at
+    ``-O{jit_opt}`` in a private temporary directory, then moved into ``jit_cache`` under a hash of
+    the NLP, the CasADi version and the compiler flags, so any later process (or agent) with the same
+    NLP loads it in milliseconds. Nothing is written to the working directory and the process never
+    changes directory. (CasADi's own ``jit`` option cannot promise that: in CasADi 3.8 nlpsol's jit
+    writes its C source to the working directory whatever ``jit_options["directory"]`` says.)
+    Returns None (with a warning) when code generation, compilation or loading fails.
+    """
+    oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
+    solver = ca.nlpsol("mpc", settings.solver, oracle, options)  # for its derivative functions
+    names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
+    compiler = os.environ.get("CC", "gcc")
+    flags = [f"-O{settings.jit_opt}"]
+    key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
+    digest = hashlib.sha256("\n".join(key).encode()).hexdigest()[:24]
+    name = f"riskmpc_{digest}"
+    cache = _private_cache() if settings.jit_cache is None else os.fspath(settings.jit_cache)
+    library = os.path.join(cache, f"{name}.so")
+    try:
+        if not os.path.exists(library):
+            os.makedirs(cache, exist_ok=True)
+            with tempfile.TemporaryDirectory(prefix="riskmpc_build_") as tmp:
+                generator = ca.CodeGenerator(name, {"with_header": False})
+                generator.add(oracle)
+                for n in names:
+                    generator.add(solver.get_function(n))
+                source = generator.generate(tmp + os.sep)
+                built = os.path.join(tmp, f"{name}.so")
+                subprocess.run(
+                    [*shlex.split(compiler), "-fPIC", "-shared", *flags, source, "-o", built],
+                    cwd=tmp,
+                    check=True,
+                    capture_output=True,
+                )
+                partial = f"{library}.{os.getpid()}.tmp"
+                shutil.move(built, partial)
+                os.replace(partial, library)  # atomic: no process loads a half-written library
+        # the oracle is the library's compiled "nlp": nothing left to expand
+        loaded = {k: v for k, v in options.items() if k != "expand"}
+        return ca.nlpsol("mpc", settings.solver, library, loaded)
+    except Exception as err:  # a broken compiler must not break the agent
+        detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]
+        warnings.warn(f"compiling the solver failed ({err} {detail}); building without jit", stacklevel=6)
+        return None
+
+
+def call_solver(
+    problem: Problem, args: dict[str, Any], solver: str
+) -> tuple[dict[str, np.ndarray], str, bool, int, dict[str, float]]:
+    """One solver call: ``(outputs, status, success, iterations, wall times)``; never raises."""
+    try:
+        with np.errstate(all="ignore"):
+            res = problem.solver(**args)
+        stats = problem.solver.stats()
+    except Exception as err:  # never raise inside an episode
+        return {}, f"exception: {err}", False, 0, {}
+    out = {k: np.asarray(v).ravel() for k, v in res.items()}
+    if solver == "ipopt":
+        status = str(stats.get("return_status", "unknown"))
+        ok = status in IPOPT_SUCCESS
+    else:
+        status = str(stats.get("unified_return_status", stats.get("return_status", "unknown")))
+        ok = bool(stats.get("success", False))
+    ok = ok and all(np.all(np.isfinite(out[k])) for k in ("x", "lam_x", "lam_g", "f"))
+    times = {k: float(v) for k, v in stats.items() if k.startswith("t_wall_") and v}
+    return out, status, ok, int(stats.get("iter_count", 0)), times
+
+
+@functools.cache
+def _private_cache() -> str:
+    """A per-process directory for compiled solvers when ``jit_cache=None`` (removed at exit)."""
+    path = tempfile.mkdtemp(prefix="riskmpc_jit_")
+    atexit.register(shutil.rmtree, path, ignore_errors=True)
+    return path
