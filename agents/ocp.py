@@ -32,7 +32,13 @@ The sections of :func:`assemble`, in order:
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
-  problem has the same solution, at a fraction of the cost.
+  problem has the same solution, at a fraction of the cost. ``"general_soft"`` and
+  ``"zero_soft"``: the risk rows softened, ``margin_n + s_n >= backoff`` with slacks ``s_n >= 0``
+  [margin units] and ``sum_n rho_n s_n`` added to the objective, ``rho_n = rho *``
+  :data:`EARLY_WEIGHT` ``**(N - n)`` (an exact L1 penalty: whenever every rho_n exceeds its risk
+  row's multiplier, every solution of the hard problem solves the soft one with s = 0, and a soft
+  solution with s = 0 solves the hard problem). The slack of row n is a
+  control of stage n (the last stage's after x_N), so the problem stays stage-wise for fatrop.
 
 The solver built on this NLP lives in :mod:`agents.solver`; the controller that calls it in
 :mod:`agents.mpc`.
@@ -56,7 +62,13 @@ from risk_env.prediction import Belief, predict
 from risk_env.scenario import Scenario
 
 STAGE_COSTS: tuple[str, ...] = ("reached", "paper")
-VARIANTS: tuple[str, ...] = ("general", "zero", "free")
+SOFT = "_soft"
+"""Suffix of the soft variants."""
+VARIANTS: tuple[str, ...] = ("general", "zero", "free", "general" + SOFT, "zero" + SOFT)
+EARLY_WEIGHT = 4.0
+"""A soft variant's slack of row n costs ``rho * EARLY_WEIGHT**(N - n)``: the earlier a violation,
+the dearer (near lexicographic: the plan keeps clear first at n = 1, then at n = 2, ...), since
+the object's early positions are the likely ones and the later boxes only grow."""
 NX = 6
 """Stage state: c1 [m], c2 [m], theta [rad], lambda [m], previous v [m/s], previous omega [rad/s]."""
 NU = 3
@@ -66,6 +78,21 @@ Margin = Callable[[ca.SX, Belief, ca.SX, ca.SX, bool], ca.SX]
 """``(ego (4,), belief, epsilon, risk data, zero) -> margin``: >= 0 iff the step's risk bound holds."""
 Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
 """``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
+
+
+def risk_form(variant: str) -> str:
+    """The risk rows' form of a variant: ``"general"``, ``"zero"`` or ``"free"``."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown NLP variant {variant!r}; expected one of {VARIANTS}")
+    return variant.removesuffix(SOFT)
+
+
+def soft_variant(variant: str) -> str:
+    """The soft variant of a hard one with risk rows (``"general"`` -> ``"general_soft"``)."""
+    form = risk_form(variant)
+    if form == "free":
+        raise ValueError("the free variant has no risk rows to soften")
+    return form + SOFT
 
 
 def stage_functions(
@@ -84,10 +111,11 @@ def stage_functions(
     e1, e2, e3, _ = path_error(path, x[0], x[1], x[2], 0.0, x[3], ego.v_ref, CASADI, wrap=False)
     pose_cost = ca.Function("pose_cost", [x], [w_c1 * e1**2 + w_c2 * e2**2 + w_th * e3**2])
     risk = None
-    if variant != "free":
+    form = risk_form(variant)
+    if form != "free":
         ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
         eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *risk_shape)
-        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, variant == "zero")
+        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, form == "zero")
         # only the ego state is a variable: no derivatives for the rest (compiled code: less)
         risk = ca.Function(
             "risk", [ego_s, belief_s, eps_s, data_s], [row], {"is_diff_in": [True, False, False, False]}
@@ -101,10 +129,12 @@ def assemble(
     stages: dict[str, ca.Function | None],
     risk_shape: tuple[int, int],
     stage_cost: str,
+    soft_penalty: float | None = None,
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
     called), its :data:`Layout` and the beliefs' function (object measurement (5,), uncertainty
-    numbers) -> ``(N+1, Belief.SIZE)``."""
+    numbers) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho: soften the risk rows with slacks
+    (tagged ``(n, "s", 0)``) at cost ``rho * s_n`` (a soft variant)."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
@@ -126,6 +156,8 @@ def assemble(
     # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
     X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
     U = [sym.sym(f"u_{n}", NU) for n in range(N)]
+    soft = soft_penalty is not None and risk is not None
+    S = {n: sym.sym(f"s_{n}") for n in range(1, N + 1)} if soft else {}
     w: list[Any] = []
     w_tags: list[tuple[int, str, int]] = []
     g: list[Any] = []
@@ -140,38 +172,59 @@ def assemble(
             lbg.append(lo)
             ubg.append(hi)
 
-    def add_risk(n: int) -> None:
+    def add_risk(n: int) -> Any:
+        """The risk row of state n (its slack added in a soft variant); its cost term."""
         if risk is None:
-            return
+            return 0.0
         ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-        add_g(risk(ego_n, stacked[n], p_eps, p_data[n - 1]), 0.0, math.inf, n, "risk")
+        row = risk(ego_n, stacked[n], p_eps, p_data[n - 1])
+        if not soft:
+            add_g(row, 0.0, math.inf, n, "risk")
+            return 0.0
+        add_g(row + S[n], 0.0, math.inf, n, "risk")
+        return soft_penalty * EARLY_WEIGHT ** (N - n) * S[n]
+
+    def add_slack(n: int) -> None:
+        """The slack of row n, a control of stage n (after u_n; after x_N for n = N)."""
+        if n in S:
+            w.append(S[n])
+            w_tags.append((n, "s", 0))
 
     # --- objective, dynamics, rate limits and risk, stage-wise
     cost = 0.0
     for n in range(N):
         w += [X[n], U[n]]
         w_tags += [(n, "x", i) for i in range(NX)] + [(n, "u", i) for i in range(NU)]
+        add_slack(n)
         add_g(X[n + 1] - f(X[n], U[n]), 0.0, 0.0, n, "gap")
         add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
-            add_risk(n)
+            cost += add_risk(n)
         cost += w_v * (U[n][2] - ego.v_ref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
     w.append(X[N])
     w_tags += [(N, "x", i) for i in range(NX)]
-    add_risk(N)
+    add_slack(N)
+    cost += add_risk(N)
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
     return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
 
 
 def variable_bounds(
-    scenario: Scenario, x_index: np.ndarray, u_index: np.ndarray, n_w: int, x0: np.ndarray
+    scenario: Scenario,
+    x_index: np.ndarray,
+    u_index: np.ndarray,
+    n_w: int,
+    x0: np.ndarray,
+    slack_index: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(lbx, ubx)`` of w ``(n_w,)``: x_0 fixed to the measurement, lambda_n >= the path's start,
-    the input bounds."""
+    the input bounds, slacks (at ``slack_index``) >= 0."""
     ego = scenario.ego
     lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
+    if slack_index is not None:
+        lbx[slack_index] = 0.0
     lbx[x_index[0]] = ubx[x_index[0]] = x0
     lbx[x_index[1:, 3]] = min(scenario.path.lambda_start, x0[3])
     lbx[u_index] = (ego.v_min, -ego.omega_max, ego.v_min)

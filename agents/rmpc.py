@@ -25,7 +25,8 @@ class RMPC(PathFollowingMPC):
     (L = ``grid_points`` or the scenario's). Both are piecewise smooth (``fmax``); IPOPT copes.
 
     See :class:`agents.mpc.PathFollowingMPC` for the problem, the solver options and the fallback
-    (shifted previous plan, then braking; counted in :attr:`failures`, never raised).
+    (the soft problem, then the safest rate-limited manoeuvre; counted in :attr:`failures`, never
+    raised) within the step's wall-time cap ``max_solve_time``.
 
     >>> from risk_env import Scenario
     >>> agent = RMPC(Scenario.preset("low"))            # doctest: +SKIP

@@ -59,8 +59,8 @@ class SMPC(PathFollowingMPC):
     solves the full problem from every rollout.
 
     The severity model is the scenario's (``scenario.severity``). See
-    :class:`agents.mpc.PathFollowingMPC` for the problem, solver options and the fallback (shifted
-    previous plan, then braking; counted in :attr:`failures`, never raised).
+    :class:`agents.mpc.PathFollowingMPC` for the problem, solver options and the fallback (the soft
+    problem, then the safest manoeuvre; counted in :attr:`failures`, never raised).
     """
 
     RISK_METHODS = ("exact", "monte_carlo")

@@ -24,6 +24,7 @@ from __future__ import annotations
 import atexit
 import functools
 import hashlib
+import math
 import os
 import shlex
 import shutil
@@ -39,7 +40,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from agents.ocp import NU, NX, STAGE_COSTS, Margin, assemble, stage_functions
+from agents.budget import CallTimes
+from agents.ocp import EARLY_WEIGHT, NU, NX, SOFT, STAGE_COSTS, Margin, assemble, stage_functions
 from risk_env.scenario import Scenario
 
 SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
@@ -50,6 +52,12 @@ DEFAULT_JIT_CACHE = os.environ.get(
 """Where compiled solvers (shared libraries) are kept between processes."""
 _COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
 """The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
+USEFUL_RUNG = 2.0
+"""A fatrop rung is built when its iterations at the prior time per iteration take at most this
+many step caps (a larger one could never fit the time left in a step)."""
+ITERATION_EVALUATIONS = 3.0
+"""A solver iteration costs about this many evaluations of the NLP's derivatives (line search,
+restoration)."""
 _CACHE_SIZE = 48
 _SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
 
@@ -74,6 +82,15 @@ class SolverSettings:
     max_iter: int = 150
     warm_start: bool = True
     solver_options: dict[str, Any] = field(default_factory=dict)
+    time_limit: float | None = None
+    """The wall-time cap of a step [s] (None: none): IPOPT's own ``max_wall_time`` at the largest
+    rung; for fatrop (no time limit) it decides which rungs are worth building."""
+    rungs: int = 1
+    """Rungs of the ladder: rung r limits a call to ``max_iter // 2**r`` iterations (fatrop) or
+    ``time_limit / 2**r`` seconds (IPOPT), so that a call fits the time left in a step."""
+    soft_penalty: float = 1e4
+    """rho of the soft variants' exact L1 penalty ``sum_n rho * EARLY_WEIGHT**(N - n) s_n`` [cost
+    per margin unit] (:mod:`agents.ocp`)."""
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -85,6 +102,16 @@ class SolverSettings:
         if not (isinstance(self.tol, (int, float)) and self.tol > 0):
             raise ValueError(f"tol must be > 0, got {self.tol!r}")
         object.__setattr__(self, "tol", float(self.tol))
+        if isinstance(self.rungs, bool) or not isinstance(self.rungs, int) or self.rungs < 1:
+            raise ValueError(f"rungs must be an integer >= 1, got {self.rungs!r}")
+        if self.time_limit is not None and not (
+            isinstance(self.time_limit, (int, float)) and self.time_limit > 0
+        ):
+            raise ValueError(f"time_limit must be > 0 [s] (or None), got {self.time_limit!r}")
+        if not (isinstance(self.soft_penalty, (int, float)) and math.isfinite(self.soft_penalty)):
+            raise ValueError(f"soft_penalty must be a finite number > 0, got {self.soft_penalty!r}")
+        if self.soft_penalty <= 0:
+            raise ValueError(f"soft_penalty must be > 0, got {self.soft_penalty!r}")
 
     def key(self) -> tuple[Any, ...]:
         """What of the settings changes a built solver (not where compiled code is kept)."""
@@ -98,10 +125,23 @@ class SolverSettings:
             self.max_iter,
             self.warm_start,
             options,
+            self.time_limit,
+            self.rungs,
+            self.soft_penalty,
         )
 
-    def plugin_options(self) -> dict[str, Any]:
-        """The nlpsol plugin's options (IPOPT's or fatrop's), the user's on top."""
+    def rung_limits(self) -> tuple[tuple[int, float | None], ...]:
+        """``(max_iter, max_wall_time [s] or None)`` of each rung, the largest first."""
+        out = []
+        for r in range(self.rungs):
+            iterations = max(1, self.max_iter >> r) if self.solver == "fatrop" else self.max_iter
+            wall = None if self.time_limit is None or self.solver != "ipopt" else self.time_limit / 2**r
+            out.append((iterations, wall))
+        return tuple(out)
+
+    def plugin_options(self, rung: int = 0) -> dict[str, Any]:
+        """The nlpsol plugin's options (IPOPT's or fatrop's) at ``rung``, the user's on top."""
+        max_iter, wall = self.rung_limits()[rung]
         extra = {k: v for k, v in self.solver_options.items() if k not in SOLVERS}
         if self.solver == "ipopt":
             ipopt = {
@@ -112,7 +152,7 @@ class SolverSettings:
                 "acceptable_tol": max(1e-3, 10 * self.tol),
                 "acceptable_constr_viol_tol": 1e-5,
                 "acceptable_iter": 5,
-                "max_iter": self.max_iter,
+                "max_iter": max_iter,
                 "mu_strategy": "adaptive",
                 "hessian_approximation": "exact",
             }
@@ -123,6 +163,8 @@ class SolverSettings:
                     warm_start_mult_bound_push=1e-6,
                     mu_init=1e-3,
                 )
+            if wall is not None:
+                ipopt["max_wall_time"] = wall
             ipopt.update(self.solver_options.get("ipopt", {}))
             return {"ipopt": ipopt, **extra}
         # CasADi 3.8's fatrop takes a primal initial guess only (no warm_start_* options); a small
@@ -131,7 +173,7 @@ class SolverSettings:
             "print_level": 0,
             "tol": self.tol,
             "constr_viol_tol": 1e-6,
-            "max_iter": self.max_iter,
+            "max_iter": max_iter,
             "mu_init": 1e-3 if self.warm_start else 1e-1,
             "bound_push": 1e-6 if self.warm_start else 1e-2,
             "bound_frac": 1e-6 if self.warm_start else 1e-2,
@@ -145,7 +187,10 @@ class Problem:
     """One built NLP variant: the solver, an evaluator and the index maps of its layout."""
 
     variant: str
-    solver: ca.Function
+    solvers: tuple[ca.Function, ...]
+    """The solver at each rung of :meth:`SolverSettings.rung_limits`, the largest first."""
+    limits: tuple[tuple[int, float | None], ...]
+    """``(max_iter, max_wall_time [s] or None)`` of each rung."""
     evaluate: ca.Function
     """(w, p) -> (objective, g): scores initial-guess candidates."""
     rollout: ca.Function
@@ -160,6 +205,11 @@ class Problem:
     """(N, NU) positions of the inputs in w."""
     risk_rows: np.ndarray
     """Rows of g holding margin_n, n = 1..N (empty for ``"free"``)."""
+    slack_index: np.ndarray
+    """Positions of the slacks s_n, n = 1..N, in w (empty for hard variants)."""
+    slack_costs: np.ndarray
+    """rho_n, the cost of each slack s_n, in the order of :attr:`slack_index` (empty for hard
+    variants)."""
     w_tags: tuple[tuple[int, str, int], ...]
     """(stage, kind, component) of every entry of w."""
     shift_w: np.ndarray
@@ -170,10 +220,21 @@ class Problem:
     """Seconds to build (and with jit compile) the solver."""
     jit: bool
     """Whether the solver's functions were compiled."""
+    times: CallTimes
+    """The rungs' limits and the measured time per iteration (shared by the cached copies)."""
 
     @property
     def n_w(self) -> int:
         return len(self.w_tags)
+
+    @property
+    def solver(self) -> ca.Function:
+        """The largest rung's solver."""
+        return self.solvers[0]
+
+    @property
+    def soft(self) -> bool:
+        return self.variant.endswith(SOFT)
 
 
 def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Problem:
@@ -198,30 +259,55 @@ def build_problem(
     N = scenario.horizon
     stages = stage_functions(scenario, variant, margin, risk_shape)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
+    penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty
     )
 
-    options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
-    options.update(settings.plugin_options())
+    base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
     if settings.solver == "fatrop":
-        options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
+        base["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
     jit = settings.jit and have_c_compiler()
     if settings.jit and not jit:
         warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=5)
-    solver = ca.nlpsol("mpc", settings.solver, nlp, options)
+    oracle: Any = nlp
     if jit:
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
-        # code holds the risk row and its derivatives once instead of N times
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost)
-        compiled = compiled_solver(calls, {**options, "expand": False}, settings)
-        jit = compiled is not None
-        solver = compiled if jit else solver
+        # code holds the risk row and its derivatives once instead of N times; every rung loads
+        # the one library, whose compiled "nlp" leaves nothing to expand
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty)
+        base["expand"] = False
+        library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
+        jit = library is not None
+        oracle = library if jit else nlp
+        base["expand"] = not jit
+
+    derivatives: dict[str, ca.Function] = {}
+
+    def make(rung: int) -> ca.Function:
+        solver = ca.nlpsol(
+            "mpc", settings.solver, oracle, {**base, **derivatives, **settings.plugin_options(rung)}
+        )
+        if settings.solver == "ipopt" and not jit and not derivatives:  # IPOPT's rungs share them
+            names = {"grad_f": "nlp_grad_f", "jac_g": "nlp_jac_g", "hess_lag": "nlp_hess_l"}
+            derivatives.update({k: solver.get_function(v) for k, v in names.items()})
+        return solver
+
+    # the smallest rung first: its derivative evaluations give the prior time per iteration, which
+    # leaves out the larger fatrop rungs that could never fit in the cap
+    ladder = settings.rung_limits()
+    smallest = make(len(ladder) - 1)
+    prior = iteration_time(smallest)
+    cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
+    rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * prior <= cap]
+    solvers = [make(r) for r in rungs] + [smallest]
+    limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
 
     index = {tag: i for i, tag in enumerate(w_tags)}
     return Problem(
         variant=variant,
-        solver=solver,
+        solvers=tuple(solvers),
+        limits=limits,
         evaluate=ca.Function("evaluate", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]),
         rollout=stages["f"].mapaccum(N),
         beliefs=belief_fn,
@@ -230,19 +316,41 @@ def build_problem(
         x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
         u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
         risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+        slack_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int),
+        slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
         w_tags=tuple(w_tags),
         shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
         g_tags=tuple(g_tags),
         build_time=time.perf_counter() - t0,
         jit=jit,
+        times=CallTimes(limits, prior),
     )
 
 
-def compiled_solver(
-    nlp: dict[str, Any], options: dict[str, Any], settings: SolverSettings
-) -> ca.Function | None:
-    """The solver of ``nlp`` with its functions (the NLP and the derivatives the solver evaluates)
-    compiled into a shared library, loaded from the disk cache when it holds this exact NLP.
+def iteration_time(solver: ca.Function, repeats: int = 3) -> float:
+    """A prior for the time of one solver iteration [s]: :data:`ITERATION_EVALUATIONS` times the
+    evaluations of the NLP's derivatives (the Lagrangian's Hessian, the constraint Jacobian, the
+    objective's gradient and the constraints) at a random point, the fastest of ``repeats``."""
+    rng = np.random.default_rng(0)
+    total = 0.0
+    for name in ("nlp_hess_l", "nlp_jac_g", "nlp_grad_f", "nlp_g"):
+        if not solver.has_function(name):
+            continue
+        f = solver.get_function(name)
+        args = [rng.random(f.size_in(i)) for i in range(f.n_in())]
+        best = math.inf
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            with np.errstate(all="ignore"):
+                f(*args)
+            best = min(best, time.perf_counter() - t0)
+        total += best
+    return ITERATION_EVALUATIONS * total
+
+
+def compiled_library(nlp: dict[str, Any], options: dict[str, Any], settings: SolverSettings) -> str | None:
+    """The path of a shared library with the functions of ``nlp`` (the NLP and the derivatives the
+    solver evaluates), from the disk cache when it holds this exact NLP, else compiled.
 
     The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or gcc) at
     ``-O{jit_opt}`` in a private temporary directory, then moved into ``jit_cache`` under a hash of
@@ -251,6 +359,7 @@ def compiled_solver(
     changes directory. (CasADi's own ``jit`` option cannot promise that: in CasADi 3.8 nlpsol's jit
     writes its C source to the working directory whatever ``jit_options["directory"]`` says.)
     Returns None (with a warning) when code generation, compilation or loading fails.
+    ``ca.nlpsol(name, solver, library, options)`` then builds a solver on it.
     """
     oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
     solver = ca.nlpsol("mpc", settings.solver, oracle, options)  # for its derivative functions
@@ -281,9 +390,8 @@ def compiled_solver(
                 partial = f"{library}.{os.getpid()}.tmp"
                 shutil.move(built, partial)
                 os.replace(partial, library)  # atomic: no process loads a half-written library
-        # the oracle is the library's compiled "nlp": nothing left to expand
-        loaded = {k: v for k, v in options.items() if k != "expand"}
-        return ca.nlpsol("mpc", settings.solver, library, loaded)
+        ca.nlpsol("mpc", settings.solver, library, options)  # loads: raises here, not in the caller
+        return library
     except Exception as err:  # a broken compiler must not break the agent
         detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]
         warnings.warn(f"compiling the solver failed ({err} {detail}); building without jit", stacklevel=6)
@@ -291,13 +399,15 @@ def compiled_solver(
 
 
 def call_solver(
-    problem: Problem, args: dict[str, Any], solver: str
+    problem: Problem, args: dict[str, Any], solver: str, rung: int = 0
 ) -> tuple[dict[str, np.ndarray], str, bool, int, dict[str, float]]:
-    """One solver call: ``(outputs, status, success, iterations, wall times)``; never raises."""
+    """One solver call at ``rung``: ``(outputs, status, success, iterations, wall times)``; never
+    raises."""
+    function = problem.solvers[rung]
     try:
         with np.errstate(all="ignore"):
-            res = problem.solver(**args)
-        stats = problem.solver.stats()
+            res = function(**args)
+        stats = function.stats()
     except Exception as err:  # never raise inside an episode
         return {}, f"exception: {err}", False, 0, {}
     out = {k: np.asarray(v).ravel() for k, v in res.items()}

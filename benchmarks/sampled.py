@@ -45,6 +45,8 @@ COLUMNS = (
     "goal_rate",
     "failed_solves",
     "solve_ms_median",
+    "fallback_soft",
+    "fallback_manoeuvre",
 )
 
 
@@ -103,6 +105,8 @@ def run_job(job: Job) -> list[dict[str, Any]]:
                 "e_acc": rec.e_acc,
                 "d_min": rec.d_min,
                 "failures": rec.failures,
+                "soft": rec.fallbacks("soft"),
+                "manoeuvre": rec.fallbacks("manoeuvre"),
                 "solve_ms": 1e3 * rec.solve_time,
             }
         )
@@ -136,6 +140,8 @@ def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
         "goal_rate": round(sum(e["success"] for e in episodes) / n, 4),
         "failed_solves": int(sum(e["failures"] for e in episodes)),
         "solve_ms_median": round(float(np.median(solve)), 2),
+        "fallback_soft": int(sum(e["soft"] for e in episodes)),
+        "fallback_manoeuvre": int(sum(e["manoeuvre"] for e in episodes)),
     }
 
 
@@ -147,7 +153,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         "with calibrated risk it matches Risk mean (both are per-step expected harm).",
         "",
         "| agent | severity | unc. | eps | episodes | collisions [95% CI] | risk mean | risk p95 |"
-        " steps > eps | harm/step | e_acc | d_min mean (min) | goal | failed |",
+        " steps > eps | harm/step | e_acc | d_min mean (min) | goal | fallbacks (soft / manoeuvre) |",
         "|" + " --- |" * 14,
     ]
     for r in rows:
@@ -158,7 +164,8 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f"{r['risk_mean']:.3g} | {r['risk_p95']:.3g} | {100 * r['violation_rate']:.1f}% | "
             f"{r['harm_per_step']:.3g} | {r['e_acc_mean']:.1f} | "
             f"{r['d_min_mean']:.1f} ({r['d_min_min']:.1f}) | "
-            f"{100 * r['goal_rate']:.0f}% | {r['failed_solves']} |"
+            f"{100 * r['goal_rate']:.0f}% | "
+            f"{r['failed_solves']} ({r['fallback_soft']} / {r['fallback_manoeuvre']}) |"
         )
     return "\n".join(lines) + "\n"
 
