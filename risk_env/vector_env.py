@@ -20,7 +20,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from risk_env import dynamics
+from risk_env import checks, dynamics
 from risk_env.env import ACTION_TOLERANCE, RiskCrossingEnv
 from risk_env.ops import NUMPY
 from risk_env.path import PathBatch
@@ -48,8 +48,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        num_envs = checks.integer("num_envs", num_envs, minimum=1)
         if render_mode is not None:
             raise ValueError(
                 "the batched RiskCrossing-v0 does not render; use gym.make_vec(..., vectorization_mode="
@@ -198,12 +197,7 @@ class RiskCrossingVectorEnv(VectorEnv):
 
     def _check_actions(self, actions: Any, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(v, omega)`` arrays ``(B,)``; raises ``ValueError`` naming the copies the Box rejects."""
-        try:
-            a = np.asarray(actions, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"actions must be numbers of shape ({self.num_envs}, 2), got {actions!r}"
-            ) from None
+        a = checks.real_array(actions, "actions", f"numbers of shape ({self.num_envs}, 2)")
         if a.shape != (self.num_envs, 2):
             raise ValueError(
                 f"actions must have shape ({self.num_envs}, 2) = (v [m/s], omega [rad/s]), got {a.shape}"
