@@ -148,8 +148,8 @@ def _has_bool(items: list | tuple) -> bool:
 def space_action(action: Any, space: spaces.Space, name: str = "action") -> None:
     """Check an action for a Gymnasium ``space`` before an env sees it.
 
-    ``Box``: real numbers (:func:`real_array`) of the space's shape, finite where the space's
-    bounds are (range checks are left to the env, which may clip on purpose); ``Discrete``: an
+    ``Box``: finite real numbers (:func:`real_array`) of the space's shape, a single number for a
+    one-entry Box (the range is left to the env, which may clip on purpose); ``Discrete``: an
     integer in range; ``Tuple``: each part against its space. Other spaces: ``space.contains``.
     """
     if isinstance(space, spaces.Box):
@@ -159,8 +159,8 @@ def space_action(action: Any, space: spaces.Space, name: str = "action") -> None
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name} must be finite, got {action!r}")
     elif isinstance(space, spaces.Discrete):
-        if isinstance(action, np.ndarray) and action.size == 1 and action.ndim <= 1:
-            action = action.reshape(())[()]  # SB3 and highway-env pass (), (1,) arrays too
+        if isinstance(action, np.ndarray) and action.ndim == 0:
+            action = action[()]
         index = integer(name, action)
         if not space.start <= index < space.start + space.n:
             high = space.start + space.n
