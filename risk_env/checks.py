@@ -29,8 +29,16 @@ from gymnasium import spaces
 
 REAL_KINDS = "fiu"
 """numpy dtype kinds of real numbers: float, signed and unsigned integer (not bool, not complex)."""
+ACTION_TOLERANCE = 1e-6
+"""Actions may exceed a limit by this much relative to it, and by at least this much [m/s, rad/s]:
+the float32 action Box rounds its bounds by up to 6e-8 relative. They are applied as given."""
 _REAL_ONLY = "; only real numbers (ints and floats) pass"
 _KIND_NAMES = {"b": "bools", "c": "complex numbers", "U": "strings", "S": "bytes", "O": "dtype object"}
+
+
+def slack(limit: float) -> float:
+    """How far an action may exceed ``limit`` (:data:`ACTION_TOLERANCE`, relative, at least absolute)."""
+    return ACTION_TOLERANCE * max(1.0, abs(limit))
 
 
 def describe(value: Any) -> str:

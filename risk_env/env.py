@@ -19,6 +19,7 @@ import numpy as np
 from gymnasium import spaces
 
 from risk_env import checks, dynamics, observation
+from risk_env.checks import ACTION_TOLERANCE, slack  # noqa: F401  (ACTION_TOLERANCE: public here too)
 from risk_env.ops import NUMPY
 from risk_env.path import project
 from risk_env.prediction import predict
@@ -33,8 +34,6 @@ OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
 from the prediction model)."""
 RENDERERS: tuple[str, ...] = ("auto", "highway", "basic")
 """Who draws: highway-env's graphics, the basic pygame view, or ``"auto"`` (highway-env's if installed)."""
-ACTION_TOLERANCE = 1e-6
-"""Actions may exceed the Box by this much [m/s, rad/s] (float32 rounding); they are applied as given."""
 
 
 class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -60,18 +59,17 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     | 0 | ego speed v | m/s | [-4, 8] (``v_min``, ``v_max``; negative reverses) |
     | 1 | ego turn rate omega | rad/s | [-0.8, 0.8] (``omega_max``) |
 
-    The env clips nothing: an action outside the Box (by more than 1e-6), with a NaN, of a shape
-    other than ``(2,)`` or not of real numbers (bools, strings, complex numbers) raises
-    ``ValueError``; float and int arrays, lists and tuples of numbers pass. The rate limits ``accel_max`` and
-    ``omega_rate_max`` of the scenario are **not** enforced by the env; the MPC agents respect
-    them themselves.
+    The env clips nothing: an action outside the Box (by more than 1e-6, relative for limits
+    above 1: float32 rounding), with a NaN, of a shape other than ``(2,)`` or not of real numbers
+    (bools, strings, complex numbers) raises ``ValueError``; float and int arrays, lists and
+    tuples of numbers pass. The rate limits ``accel_max`` and ``omega_rate_max`` of the scenario
+    are **not** enforced by the env; the MPC agents respect them themselves.
 
     ## Observation Space
 
     ``Box((15,), float32)`` with finite bounds (1e5 for positions, arc length and position
     errors, pi for headings, 1e3 for speeds and turn rates), the same for every scenario: the
-    scenario rejects what could leave them within an episode (:mod:`risk_env.observation`); the
-    layout is
+    scenario rejects what could leave them within an episode. The layout and the bounds are
     :mod:`risk_env.observation` (``RiskCrossingEnv.observation_slices`` names its parts):
 
     | index | observation | unit |
@@ -403,12 +401,12 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if not (math.isfinite(v) and math.isfinite(omega)):
             raise ValueError(f"action must be finite, got (v, omega) = ({v}, {omega})")
         ego = self.scenario.ego
-        if not ego.v_min - ACTION_TOLERANCE <= v <= ego.v_max + ACTION_TOLERANCE:
+        if not ego.v_min - slack(ego.v_min) <= v <= ego.v_max + slack(ego.v_max):
             raise ValueError(
                 f"action v = {v} m/s lies outside [v_min, v_max] = [{ego.v_min}, {ego.v_max}]"
                 " (the env clips nothing)"
             )
-        if not abs(omega) <= ego.omega_max + ACTION_TOLERANCE:
+        if not abs(omega) <= ego.omega_max + slack(ego.omega_max):
             raise ValueError(
                 f"action omega = {omega} rad/s lies outside [-omega_max, omega_max] ="
                 f" [{-ego.omega_max}, {ego.omega_max}] (the env clips nothing)"

@@ -310,14 +310,16 @@ class Scenario:
         with V its speed or, sampled, the edge of its one-step speed interval; the closest path
         point of a point at distance D from the goal lies within arc length pi D of it (its chord
         is at most 2 D), so the arc length and the position error are at most pi D. Actions may
-        exceed the limits by the env's 1e-6 tolerance: float32 rounding absorbs it.
+        exceed the limits by :func:`risk_env.checks.slack`.
         """
         ego, obj, u, path = self.ego, self.object, self.uncertainty, self.path
         span = self.max_steps * self.dt
-        ego_speed = max(abs(ego.v_min), abs(ego.v_max))
+        # the env accepts actions beyond the limits by checks.slack (float32 rounding)
+        v_lo, v_hi = ego.v_min - checks.slack(ego.v_min), ego.v_max + checks.slack(ego.v_max)
+        ego_speed = max(abs(v_lo), abs(v_hi))
         ego_reach = span * ego_speed
-        v_lo, v_hi = u.velocity_bounds0
-        object_speed = max(abs(obj.speed), abs(v_lo - u.box_growth[2]), abs(v_hi + u.box_growth[2]))
+        o_lo, o_hi = u.velocity_bounds0
+        object_speed = max(abs(obj.speed), abs(o_lo - u.box_growth[2]), abs(o_hi + u.box_growth[2]))
         half = max(u.box_half_width0[0] + u.box_growth[0], u.box_half_width0[1] + u.box_growth[1])
         start, goal = ego.start, path.goal
         to_goal = math.hypot(start.x - goal.x, start.y - goal.y) + ego_reach
@@ -344,9 +346,14 @@ class Scenario:
                 f" uncertainty.box_half_width0, {moves}",
             ),
             "ego speed": (ego_speed, RATE_BOUND, "m/s", "ego.v_min, ego.v_max"),
-            "ego turn rate": (ego.omega_max, RATE_BOUND, "rad/s", "ego.omega_max"),
+            "ego turn rate": (
+                ego.omega_max + checks.slack(ego.omega_max),
+                RATE_BOUND,
+                "rad/s",
+                "ego.omega_max",
+            ),
             "speed error": (
-                max(ego.v_max - ego.v_ref, ego.v_ref - ego.v_min),
+                max(v_hi - ego.v_ref, ego.v_ref - v_lo),
                 RATE_BOUND,
                 "m/s",
                 "ego.v_ref, ego.v_min, ego.v_max",

@@ -21,7 +21,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from risk_env import checks, dynamics
-from risk_env.env import ACTION_TOLERANCE, RiskCrossingEnv
+from risk_env.checks import slack
+from risk_env.env import RiskCrossingEnv
 from risk_env.ops import NUMPY
 from risk_env.path import PathBatch
 from risk_env.prediction import Belief, predict
@@ -205,8 +206,8 @@ class RiskCrossingVectorEnv(VectorEnv):
         ego = self.base_scenario.ego
         bad_value = ~np.isfinite(a).all(axis=1)
         v, omega = np.nan_to_num(a[:, 0]), np.nan_to_num(a[:, 1])
-        outside = (v < ego.v_min - ACTION_TOLERANCE) | (v > ego.v_max + ACTION_TOLERANCE)
-        outside |= np.abs(omega) > ego.omega_max + ACTION_TOLERANCE
+        outside = (v < ego.v_min - slack(ego.v_min)) | (v > ego.v_max + slack(ego.v_max))
+        outside |= np.abs(omega) > ego.omega_max + slack(ego.omega_max)
         for name, bad in (("non-finite", bad_value), ("outside the action space", outside & ~bad_value)):
             bad &= active
             if bad.any():
