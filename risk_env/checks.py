@@ -128,7 +128,7 @@ def real_array(value: Any, name: str, expected: str) -> np.ndarray:
     or int ndarray passes after one dtype test.
     """
     if type(value) is np.ndarray and value.dtype.kind in REAL_KINDS:  # the fast path
-        return value if value.dtype == np.float64 else value.astype(np.float64)
+        return np.asarray(value, dtype=np.float64)
     if isinstance(value, (list, tuple)) and _has_bool(value):
         # numpy would turn [True, 1.5] into floats: look for Python and numpy bools first
         raise ValueError(f"{name} must be {expected}, got {describe(value)} with bools{_REAL_ONLY}")

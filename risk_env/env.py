@@ -401,12 +401,14 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if not (math.isfinite(v) and math.isfinite(omega)):
             raise ValueError(f"action must be finite, got (v, omega) = ({v}, {omega})")
         ego = self.scenario.ego
-        if not ego.v_min - slack(ego.v_min) <= v <= ego.v_max + slack(ego.v_max):
+        if not (
+            ego.v_min <= v <= ego.v_max or ego.v_min - slack(ego.v_min) <= v <= ego.v_max + slack(ego.v_max)
+        ):
             raise ValueError(
                 f"action v = {v} m/s lies outside [v_min, v_max] = [{ego.v_min}, {ego.v_max}]"
                 " (the env clips nothing)"
             )
-        if not abs(omega) <= ego.omega_max + slack(ego.omega_max):
+        if not (abs(omega) <= ego.omega_max or abs(omega) <= ego.omega_max + slack(ego.omega_max)):
             raise ValueError(
                 f"action omega = {omega} rad/s lies outside [-omega_max, omega_max] ="
                 f" [{-ego.omega_max}, {ego.omega_max}] (the env clips nothing)"
