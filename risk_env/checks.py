@@ -143,6 +143,20 @@ def real_array(value: Any, name: str, expected: str) -> np.ndarray:
     return a.astype(np.float64, copy=False)
 
 
+def seeds(seed: Any, n: int) -> list[int | None]:
+    """Seeds of ``n`` copies from ``None``, one integer ``s`` (copies get ``s + i``) or ``n`` of
+    them (integers or ``None``); integers of any integral type, >= 0."""
+    if seed is None:
+        return [None] * n
+    if not isinstance(seed, (list, tuple, np.ndarray)):
+        first = integer("seed", seed, minimum=0)
+        return [first + i for i in range(n)]
+    out = list(seed)
+    if len(out) != n:
+        raise ValueError(f"seed must be None, an int or a list of {n} seeds, got {len(out)}: {seed!r}")
+    return [None if s is None else integer(f"seed[{i}]", s, minimum=0) for i, s in enumerate(out)]
+
+
 def _has_bool(items: list | tuple) -> bool:
     """Whether nested lists and tuples hold a Python or numpy bool."""
     for item in items:

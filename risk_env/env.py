@@ -283,7 +283,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start a new episode (the scenario's start, or a drawn variation of it with
         ``randomize=True``); ``options`` takes no keys."""
-        super().reset(seed=seed)
+        super().reset(seed=None if seed is None else checks.integer("seed", seed, minimum=0))
         if options:
             raise ValueError(f"RiskCrossing-v0 takes no reset options, got {sorted(options)}")
         if self.randomize:

@@ -102,12 +102,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             raise ValueError(
                 f"reset_mask must be a bool array of shape ({n},), got {mask.dtype} {mask.shape}"
             )
-        if seed is None or isinstance(seed, int):
-            seeds: list[int | None] = [None if seed is None else seed + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"seed must be None, an int or a list of {n} seeds, got {len(seeds)}")
+        seeds = checks.seeds(seed, n)
         if not self._started and not mask.all():
             raise gym.error.ResetNeeded("the first reset must reset every copy")
         for i in np.flatnonzero(mask):

@@ -470,3 +470,33 @@ def test_space_action_for_tuple_spaces():
         checks.space_action((0,), space)
     with pytest.raises(ValueError, match="not in the action space"):
         checks.space_action(np.array([2, 1]), spaces.MultiBinary(2))
+
+
+# ---------------------------------------------------------------- seeds and indices
+def test_seeds_take_integral_types_and_name_bad_ones():
+    single, batched = make(), gym.make_vec(ENV_ID, num_envs=2)
+    a, _ = single.reset(seed=np.int64(3))
+    np.testing.assert_array_equal(a, single.reset(seed=3)[0])
+    b, _ = batched.reset(seed=np.int64(3))
+    np.testing.assert_array_equal(b, batched.reset(seed=[3, 4])[0])
+    batched.reset(seed=[np.uint32(1), None])
+    for env in (single, batched):
+        with pytest.raises(TypeError, match=r"seed must be an integer .*2\.5 \(float\)"):
+            env.reset(seed=2.5)
+        with pytest.raises(ValueError, match="seed must be an integer >= 0, got -1"):
+            env.reset(seed=-1)
+    with pytest.raises(TypeError, match=r"seed\[1\] must be an integer .*'4' \(str\)"):
+        batched.reset(seed=[3, "4"])
+    with pytest.raises(ValueError, match="seed must be None, an int or a list of 2 seeds, got 3"):
+        batched.reset(seed=[1, 2, 3])
+
+
+def test_risk_cost_wrapper_vehicle_index_takes_integral_types(highway_envs):
+    from risk_env.highway import RiskCostWrapper
+
+    env = highway_envs[1].env
+    assert RiskCostWrapper(env, vehicle_index=np.int64(0)).vehicle_index == 0
+    with pytest.raises(TypeError, match=r"vehicle_index must be an integer .*0\.0 \(float\)"):
+        RiskCostWrapper(env, vehicle_index=0.0)
+    with pytest.raises(ValueError, match="vehicle_index must be an integer >= 0, got -1"):
+        RiskCostWrapper(env, vehicle_index=-1)

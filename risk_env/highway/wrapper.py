@@ -79,8 +79,7 @@ class RiskCostWrapper(gym.Wrapper):
             )
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env.Scenario, got {type(scenario).__name__}")
-        if isinstance(vehicle_index, bool) or not isinstance(vehicle_index, int) or vehicle_index < 0:
-            raise ValueError(f"vehicle_index must be an integer >= 0, got {vehicle_index!r}")
+        vehicle_index = checks.integer("vehicle_index", vehicle_index, minimum=0)
         self.scenario = scenario
         self.estimator: RiskEstimator = make_estimator(estimator, scenario)
         self.vehicle_index = vehicle_index
