@@ -11,14 +11,17 @@
 | 10 | lambda: arc length of the ego's closest path point | m (goal at 0) |
 | 11..14 | path error e_k = (c1 - c1_P, c2 - c2_P, theta - theta_P, v - v_ref) | m, m, rad, m/s |
 
-Bounds: the observation Box is fixed, the same for every scenario (a trained policy keeps its
-space): :data:`POSITION_BOUND` for positions, arc length and position errors, pi for the wrapped
-headings, :data:`RATE_BOUND` for speeds, turn rates and the speed error (:func:`bounds`). The
-scenario guarantees the fit instead: :class:`~risk_env.scenario.Scenario` rejects, naming the
-fields, any scenario whose observations could leave the Box within ``max_steps`` steps, with the
-object moving either way (``object_motion="paper"`` or ``"sampled"``); see
-:meth:`~risk_env.scenario.Scenario.observation_reach`. Stepping past the episode's end raises,
-so no episode runs longer.
+Bounds: the observation Box is fixed, the same for every scenario: :data:`POSITION_BOUND` for
+positions, arc length and position errors, pi for the wrapped headings, :data:`RATE_BOUND` for
+speeds, turn rates and the speed error (:func:`bounds`). A Box derived from each scenario would
+change with it: saved policies (the PPO models) would no longer match, and randomised episodes
+and batched copies could not share one space. So the scenario guarantees the fit instead:
+:class:`~risk_env.scenario.Scenario` rejects, naming the fields, any scenario whose observations
+could leave the Box within ``max_steps`` steps, for any actions and with the object moving either
+way (``object_motion="paper"`` or ``"sampled"``); see
+:meth:`~risk_env.scenario.Scenario.observation_reach` for the worst cases. Stepping past an
+episode's end raises, so no episode runs longer. (``randomize=True`` draws each episode's
+scenario through the same check: a draw that could leave the Box raises at ``reset``.)
 """
 
 from __future__ import annotations
