@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from risk_env import checks
 from risk_env.path import point, project
 from risk_env.scenario import Scenario
 
@@ -39,9 +40,10 @@ class Variations:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
+            value = checks.real(f"Variations.{f.name}", getattr(self, f.name))
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"Variations.{f.name} must be finite and >= 0, got {value!r}")
+            object.__setattr__(self, f.name, value)
 
 
 DRAWS = 8

@@ -20,8 +20,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from risk_env import dynamics
-from risk_env.env import ACTION_TOLERANCE, RiskCrossingEnv
+from risk_env import checks, dynamics
+from risk_env.checks import slack
+from risk_env.env import RiskCrossingEnv
 from risk_env.ops import NUMPY
 from risk_env.path import PathBatch
 from risk_env.prediction import Belief, predict
@@ -48,8 +49,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        num_envs = checks.integer("num_envs", num_envs, minimum=1)
         if render_mode is not None:
             raise ValueError(
                 "the batched RiskCrossing-v0 does not render; use gym.make_vec(..., vectorization_mode="
@@ -102,12 +102,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             raise ValueError(
                 f"reset_mask must be a bool array of shape ({n},), got {mask.dtype} {mask.shape}"
             )
-        if seed is None or isinstance(seed, int):
-            seeds: list[int | None] = [None if seed is None else seed + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"seed must be None, an int or a list of {n} seeds, got {len(seeds)}")
+        seeds = checks.seeds(seed, n)
         if not self._started and not mask.all():
             raise gym.error.ResetNeeded("the first reset must reset every copy")
         for i in np.flatnonzero(mask):
@@ -198,12 +193,7 @@ class RiskCrossingVectorEnv(VectorEnv):
 
     def _check_actions(self, actions: Any, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(v, omega)`` arrays ``(B,)``; raises ``ValueError`` naming the copies the Box rejects."""
-        try:
-            a = np.asarray(actions, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"actions must be numbers of shape ({self.num_envs}, 2), got {actions!r}"
-            ) from None
+        a = checks.real_array(actions, "actions", f"numbers of shape ({self.num_envs}, 2)")
         if a.shape != (self.num_envs, 2):
             raise ValueError(
                 f"actions must have shape ({self.num_envs}, 2) = (v [m/s], omega [rad/s]), got {a.shape}"
@@ -211,8 +201,8 @@ class RiskCrossingVectorEnv(VectorEnv):
         ego = self.base_scenario.ego
         bad_value = ~np.isfinite(a).all(axis=1)
         v, omega = np.nan_to_num(a[:, 0]), np.nan_to_num(a[:, 1])
-        outside = (v < ego.v_min - ACTION_TOLERANCE) | (v > ego.v_max + ACTION_TOLERANCE)
-        outside |= np.abs(omega) > ego.omega_max + ACTION_TOLERANCE
+        outside = (v < ego.v_min - slack(ego.v_min)) | (v > ego.v_max + slack(ego.v_max))
+        outside |= np.abs(omega) > ego.omega_max + slack(ego.omega_max)
         for name, bad in (("non-finite", bad_value), ("outside the action space", outside & ~bad_value)):
             bad &= active
             if bad.any():
