@@ -31,6 +31,7 @@ class Severity(ABC):
 
     name: str
     unit: str = "J"
+    """The unit of s, as tables name it."""
 
     @abstractmethod
     def value(self, v_e: Any, th_e: Any, v_o: Any, th_o: Any, ops: Ops) -> Any:
@@ -131,7 +132,7 @@ class ProbabilitySeverity(Severity):
     """s = 1: the risk is the collision probability (dimensionless)."""
 
     name = "probability"
-    unit = "-"
+    unit = "probability"
 
     def value(self, v_e, th_e, v_o, th_o, ops):
         return 1.0 + 0.0 * v_o
@@ -301,3 +302,19 @@ def make_severity(scenario: Scenario) -> Severity:
     if scenario.severity == "injury":
         return InjurySeverity(m_e, m_o, scenario.injury_beta0, scenario.injury_beta1)
     return ProbabilitySeverity()
+
+
+def check_tolerance(value: float, severity: str, what: str = "tolerance") -> float:
+    """``value`` as a per-step risk bound in the unit of the severity named ``severity``: finite,
+    >= 0 and at most the severity's :attr:`~Severity.upper_bound` (a probability above 1 or more
+    than 2 injuries per step is a value in another unit). Raises ``ValueError`` naming it."""
+    model = make_severity(Scenario(severity=severity))
+    value = float(value)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{what} {value!r} must be finite and >= 0 [{model.unit}]")
+    if value > model.upper_bound:
+        raise ValueError(
+            f"{what} {value:g} exceeds {model.upper_bound:g}, the largest per-step risk of the"
+            f" {severity!r} severity [{model.unit}]: give it in that severity's own unit"
+        )
+    return value
