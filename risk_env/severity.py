@@ -242,7 +242,7 @@ class InjurySeverity(Severity):
         ``exp(-INJURY_SUPPORT^2 / 2)``, within the truncation interval; split at
         :data:`INJURY_BREAKS` around the mode, at the least relative speed and around it
         (:data:`KINK_GRADING`); :data:`INJURY_NODES` nodes per segment; normalised by the
-        quadrature's own mass, so a constant severity comes out exactly. Within 1e-7 of adaptive
+        quadrature's own mass, so a constant severity comes out exactly. Within 1e-8 of adaptive
         quadrature (``tests/test_severity.py``)."""
         if ops.name == "math":  # 75 nodes: numpy's vectors beat a loop over floats
             return float(self.expected(v_e, th_e, belief, NUMPY_OPS))

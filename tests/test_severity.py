@@ -141,7 +141,7 @@ def test_expectation_matches_adaptive_quadrature():
     for v_e, th_e, b in cases:
         ref = reference_expectation(model, v_e, th_e, b)
         errors.append(abs(model.expected(v_e, th_e, b, MATH) - ref))
-    assert max(errors) <= 1e-7, max(errors)
+    assert max(errors) <= 1e-8, max(errors)
 
 
 def test_expectation_faces_agree_and_gradients_are_finite():
