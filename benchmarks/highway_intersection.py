@@ -36,6 +36,8 @@ import numpy as np
 from tqdm import tqdm
 
 from benchmarks.sampled import wilson
+from risk_env.scenario import SEVERITY_NAMES
+from risk_env.severity import check_tolerance
 
 AGENTS = ("rmpc", "smpc", "idm")
 LABELS = {"rmpc": "RMPC (worst case)", "smpc": "SMPC (exact)", "idm": "highway-env IDM"}
@@ -200,7 +202,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help=f"comma-separated, of {AGENTS}; 'rmpc:3' plans against the 3 most conflicting vehicles",
     )
     parser.add_argument("--uncertainty", default="low", help="low, medium or high (per 0.5 s step)")
-    parser.add_argument("--severity", default="paper", help="paper, plastic or probability")
+    parser.add_argument("--severity", default="paper", choices=SEVERITY_NAMES, help="severity model")
     parser.add_argument("--tolerance", type=float, default=500.0, help="epsilon [units of the severity]")
     parser.add_argument("--out", type=Path, default=Path("results/highway"))
     args = parser.parse_args(argv)
@@ -216,6 +218,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"unknown agent(s) {unknown}; expected some of {AGENTS}")
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
+    try:
+        check_tolerance(args.tolerance, args.severity, "--tolerance")
+    except ValueError as error:
+        parser.error(str(error))
     return args
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from benchmarks.paper_table2 import PAPER, TOLERANCES
 from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
+from risk_env.scenario import SEVERITY_NAMES, Scenario
 
 METHODS = AGENTS
 LEVELS = ("low", "medium", "high")
@@ -83,7 +84,9 @@ def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     record: EpisodeRecord = rollout(agent, env, seed=spec.seed)
     env.close()
     scenario = env.unwrapped.scenario
-    paper = PAPER.get((spec.method, spec.uncertainty, spec.epsilon), (float("nan"), float("nan")))
+    paper = (float("nan"), float("nan"))  # the paper's figures are for its severity only
+    if scenario.severity == "paper":
+        paper = PAPER.get((spec.method, spec.uncertainty, spec.epsilon), paper)
     solve_ms = 1e3 * record.solve_time
     row = {
         "method": spec.method,
@@ -100,7 +103,7 @@ def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         "solve_ms_median": round(float(np.median(solve_ms)), 3),
         "solve_ms_p95": round(float(np.percentile(solve_ms, 95)), 3),
         "solve_ms_max": round(float(solve_ms.max()), 3),
-        "max_risk": round(float(record.risk.max()), 3),
+        "max_risk": float(f"{record.risk.max():.4g}"),  # J to 1e-6 injuries
         "wall_s": round(time.perf_counter() - t0, 3),
         "paper_e_acc": paper[0],
         "paper_d_min": paper[1],
@@ -211,6 +214,8 @@ def markdown(
 ) -> str:
     lines = ["# Table II: ours beside the paper's", ""]
     lines.append("Each cell: ours (paper). e_acc = sum of ||e_k||; d_min [m]. `*` marks a collision.")
+    units = sorted({_unit(r.get("severity", "paper")) for r in rows})
+    lines.append(f"eps in the severity's unit: {', '.join(units)}.")
     order = {"RMPC": 0, "SMPC": 1, "PPO": 2}  # the paper's two, then the learned baseline
     groups = sorted({(r["method"], r["risk_method"]) for r in rows}, key=lambda g: (order[g[0]], g[1]))
     levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
@@ -256,6 +261,13 @@ def markdown(
     return "\n".join(lines) + "\n"
 
 
+def _unit(severity: str) -> str:
+    """The unit of the severity named ``severity`` (J, probability, injuries)."""
+    from risk_env.severity import make_severity
+
+    return make_severity(Scenario(severity=severity)).unit
+
+
 def _fmt(x: float) -> str:
     return "-" if x != x else f"{x:.1f}"
 
@@ -276,12 +288,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--uncertainty", default="low,medium,high", help="comma list of low, medium, high")
     p.add_argument(
-        "--tolerances", default=",".join(f"{t:g}" for t in TOLERANCES), help="comma list of epsilon [J]"
+        "--tolerances",
+        default=",".join(f"{t:g}" for t in TOLERANCES),
+        help="comma list of epsilon in the severity's unit (default: the paper's, in J)",
     )
     p.add_argument(
         "--v-ref", type=float, default=None, help="reference speed [m/s] (default: the Scenario's, 4)"
     )
-    p.add_argument("--severity", default=None, help="paper, plastic or probability (default: paper)")
+    p.add_argument("--severity", default=None, choices=SEVERITY_NAMES, help="severity model (default: paper)")
     p.add_argument("--out", type=Path, default=Path("results"), help="output folder (default: results/)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS", help="run on Ray")
@@ -306,6 +320,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--tolerances must be numbers, got {args.tolerances!r}")
     if any(t < 0 for t in args.tolerances):
         p.error("--tolerances must be >= 0")
+    from risk_env.severity import check_tolerance
+
+    try:
+        for t in args.tolerances:
+            check_tolerance(t, args.severity or "paper", "--tolerances value")
+    except ValueError as error:
+        p.error(str(error))
     return args
 
 

@@ -161,6 +161,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     | key | value |
     | --- | --- |
     | ``risk``, ``cost`` | R_{k+1|k} (float) |
+    | ``episode_risk`` | sum of ``risk`` since ``reset`` (float): Safety-Gymnasium's per-episode cost |
     | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
     | ``collision`` | ``distance <= r_e + r_o`` (bool) |
     | ``distance`` | centre distance ego-object after the step [m] (float) |
@@ -248,6 +249,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._ended: str | None = None  # why the episode ended, until reset
         self._plan: np.ndarray | None = None
         self._last_risk = 0.0
+        self._episode_risk = 0.0
         self._renderer: Any = None
 
     # ---------------------------------------------------------------- properties
@@ -297,6 +299,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._ended = None
         self._plan = None
         self._last_risk = 0.0
+        self._episode_risk = 0.0
         obs, info, _ = self._observe(risk=0.0, stepped=False)
         if self.render_mode == "human":
             self.render()
@@ -321,6 +324,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         ego_state = np.array((*self._ego_pose, v))
         risk = float(self.estimator.risk(ego_state, belief, rng=self.np_random))
         self._last_risk = risk
+        self._episode_risk += risk
         self._steps += 1
         # 4. reward terms, episode end, observation, info
         obs, info, goal = self._observe(risk, stepped=True)
@@ -425,6 +429,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         info = {
             "risk": risk,
             "cost": risk,
+            "episode_risk": self._episode_risk,
             "risk_violation": risk > s.risk_tolerance,
             "collision": collision,
             "distance": float(seen.distance),

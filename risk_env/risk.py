@@ -5,7 +5,8 @@ One interface, :class:`RiskEstimator`, serves the env, the agents, the tests and
 - :class:`MonteCarloRisk`: the paper's eq. (16), the mean of I_C s over J draws;
 - :class:`ExactRisk`: positions and speed are independent, I_C uses positions only and s speeds
   only, so R = P(||q_e - q_o|| <= r_e + r_o) E[s], the disc probability by fixed-node
-  Gauss-Legendre quadrature, E[s] in closed form. Smooth and deterministic;
+  Gauss-Legendre quadrature, E[s] in closed form (for the injury severity by fixed 1-D
+  quadrature). Smooth and deterministic;
 - :class:`WorstCaseRisk`: max over the truncation box and speed interval of I_C s (eq. 17), the
   exact box form (point-to-box distance) or the paper's L-point grid (``grid=True``).
 

@@ -20,8 +20,8 @@ from typing import Any, Literal
 from risk_env import checks
 from risk_env.observation import POSITION_BOUND, RATE_BOUND
 
-SeverityName = Literal["paper", "plastic", "probability"]
-SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability")
+SeverityName = Literal["paper", "plastic", "probability", "injury"]
+SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability", "injury")
 UNCERTAINTY_PRESETS: tuple[str, ...] = ("low", "medium", "high")
 RISK_TOLERANCES: tuple[float, ...] = (0.0, 500.0, 1000.0, 1500.0, 2000.0, 2500.0)
 """The paper's risk tolerances epsilon [J] (Table II)."""
@@ -257,7 +257,15 @@ class Scenario:
     """epsilon: the bound on the risk [units of the severity: J for the paper's]."""
     severity: SeverityName = "paper"
     """Severity model: ``"paper"`` (differential kinetic energy), ``"plastic"`` (energy lost in a
-    perfectly plastic impact, with velocity vectors) or ``"probability"`` (s = 1)."""
+    perfectly plastic impact, with velocity vectors), ``"probability"`` (s = 1) or ``"injury"``
+    (expected number of seriously injured people, from each party's delta-v)."""
+    injury_beta0: float = -4.591
+    """Intercept beta0 [-] of the ``"injury"`` severity's logistic MAIS3+ injury probability
+    ``1 / (1 + exp(-(beta0 + beta1 delta_v)))``: the model without impact angle of Geisslinger et
+    al., "An ethical trajectory planning algorithm for autonomous vehicles", Nature Machine
+    Intelligence 5, 2023."""
+    injury_beta1: float = 0.185
+    """Slope beta1 [s/m] of the same logistic in the delta-v [m/s] (same source); > 0."""
     max_steps: int = 80
     """Episode step limit K [steps]."""
     mc_samples: int = 500
@@ -286,6 +294,9 @@ class Scenario:
             self, "risk_tolerance", _positive("risk_tolerance", self.risk_tolerance, strict=False)
         )
         checks.text("severity", self.severity, SEVERITY_NAMES)
+        object.__setattr__(self, "injury_beta0", _finite("injury_beta0", self.injury_beta0))
+        # harm grows with delta-v
+        object.__setattr__(self, "injury_beta1", _positive("injury_beta1", self.injury_beta1))
         v_lo, v_hi = self.uncertainty.velocity_bounds0
         if not v_lo <= self.object.speed <= v_hi:
             raise ValueError(
@@ -439,6 +450,8 @@ OVERRIDES: Mapping[str, tuple[str | None, str]] = {
     "cost_weights": (None, "cost_weights"),
     "risk_tolerance": (None, "risk_tolerance"),
     "severity": (None, "severity"),
+    "injury_beta0": (None, "injury_beta0"),
+    "injury_beta1": (None, "injury_beta1"),
     "max_steps": (None, "max_steps"),
     "mc_samples": (None, "mc_samples"),
     "grid_points": (None, "grid_points"),

@@ -78,6 +78,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._input = np.zeros((2, n))  # v, omega last applied
         self._object = np.zeros((5, n))  # c1, c2, theta, v, omega
         self._steps = np.zeros(n, dtype=np.int64)
+        self._episode_risk = np.zeros(n)  # sum of the risk since each copy's reset
         self._autoreset = np.zeros(n, dtype=bool)
         self._started = False
 
@@ -148,6 +149,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         # 3. the risk R_{k+1|k} of the ego's new state against B
         risk = np.zeros(n)
         risk[idx] = self._risk(np.stack((x, y, theta, v[idx]), axis=-1), belief, idx)
+        self._episode_risk[idx] += risk[idx]
         self._steps[idx] += 1
         # 4. reward terms, episode end, observation, info
         seen = self._observe()
@@ -190,6 +192,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             self._input[:, i] = sc.ego.initial_input
             self._object[:, i] = (*sc.object.start.as_tuple(), sc.object.speed, sc.object.turn_rate)
             self._steps[i] = 0
+            self._episode_risk[i] = 0.0
 
     def _check_actions(self, actions: Any, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(v, omega)`` arrays ``(B,)``; raises ``ValueError`` naming the copies the Box rejects."""
@@ -246,6 +249,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         values = {
             "risk": risk,
             "cost": risk.copy(),
+            "episode_risk": self._episode_risk.copy(),
             "risk_violation": risk > self.base_scenario.risk_tolerance,
             "collision": seen.collision,
             "distance": seen.distance,

@@ -8,6 +8,7 @@ from scipy import integrate, stats
 from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
 from risk_env.ops import NUMPY
 from risk_env.risk import WorstCaseRisk, disc_probability, signed_box_distance
+from risk_env.scenario import SEVERITY_NAMES
 
 MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
 
@@ -90,7 +91,7 @@ def test_expected_severity_closed_form(severity, v_e):
         ("medium", 3, (20.0, 0.0, 0.0, 4.0), "far away"),
     ],
 )
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_exact_risk_within_monte_carlo_confidence_interval(preset, n, ego, label, severity):
     s, b = belief(preset, n, severity)
     exact = float(make_estimator("exact", s).risk(np.array(ego), b))
@@ -107,7 +108,7 @@ def test_exact_risk_within_monte_carlo_confidence_interval(preset, n, ego, label
         assert abs(exact - estimate) <= 4.5 * stderr + 1e-9 * abs(exact), (label, exact, estimate, stderr)
 
 
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_worst_case_bounds_exact_and_grid_under_approximates(severity):
     rng = np.random.default_rng(5)
     s, b = belief("medium", 3, severity)
@@ -167,7 +168,7 @@ def test_signed_box_distance():
 
 
 @pytest.mark.parametrize("name", [n for n in ESTIMATOR_NAMES if n != "monte_carlo"])
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_casadi_and_numpy_forms_agree(name, severity):
     s = Scenario.preset("high", severity=severity)
     beliefs = predict_array(s, MEASUREMENT)
@@ -205,7 +206,7 @@ def test_smoothed_monte_carlo_tends_to_the_hard_indicator():
 
 
 @pytest.mark.parametrize("preset", ["low", "medium", "high"])
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_smoothed_monte_carlo_within_its_stated_bound_of_the_hard_estimator(preset, severity):
     """The solver's form against the paper's (numpy, hard indicator) on the same draws: within
     ``smoothing_bound`` everywhere, and the bound is small where the draws are dense."""
@@ -263,7 +264,7 @@ def test_smoothed_monte_carlo_bias_in_expectation_is_small():
         assert abs(smooth - reference) <= noise + 0.01 * max(reference, 100.0) + est.severity_width
 
 
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_smooth_severity_lies_within_its_width_above_the_severity(severity):
     from risk_env.severity import make_severity
 

@@ -65,6 +65,7 @@ def _assert_same(a, b) -> None:
         {},
         {"randomize": True, "object_motion": "sampled", "uncertainty": "high", "risk_tolerance": 100.0},
         {"risk_estimator": "monte_carlo", "object_motion": "sampled", "mc_samples": 50},
+        {"severity": "injury", "object_motion": "sampled", "uncertainty": "high", "risk_tolerance": 0.005},
     ],
 )
 def test_batched_equals_sync(autoreset, kwargs) -> None:
