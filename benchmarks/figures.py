@@ -23,11 +23,14 @@ from risk_env import path as ref_path  # noqa: E402
 from risk_env.scenario import Scenario  # noqa: E402
 
 STYLES = {
-    "low": {"color": "tab:green", "ls": "-", "marker": "o"},
-    "medium": {"color": "tab:orange", "ls": "--", "marker": "s"},
-    "high": {"color": "tab:red", "ls": ":", "marker": "^"},
+    "low": {"color": "tab:green", "ls": "-", "marker": "o", "cross": 13},
+    "medium": {"color": "tab:orange", "ls": "--", "marker": "s", "cross": 9.5},
+    "high": {"color": "tab:red", "ls": ":", "marker": "^", "cross": 6},
 }
-"""Colour, line style and marker of each uncertainty level, so coinciding runs stay visible."""
+"""Colour, line style, marker and collision-cross size of each uncertainty level, so that runs
+that coincide, and collisions at the same place, stay visible."""
+DASHES = {"low": (0, (5, 2)), "medium": (0, (3, 1, 1, 1)), "high": (0, (1, 1))}
+"""Line styles of the highest tolerance's speeds in Fig. 4, one per level."""
 MARKER_STEPS = 3
 """Markers every 1.5 s (3 steps of 0.5 s), as in the paper's Fig. 3."""
 PREFERRED = {"RMPC": "worst_case", "SMPC": "exact"}
@@ -137,7 +140,7 @@ def trajectories(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out:
                     Circle(obj[-1, :2], scenario.object.radius, fc="none", ec=style["color"], ls="--", lw=1.2)
                 )
                 if r["collided"]:
-                    ax.plot(*ego[-1, :2], "x", color=style["color"], ms=11, mew=2.5, zorder=4)
+                    ax.plot(*ego[-1, :2], "x", color=style["color"], ms=style["cross"], mew=2, zorder=4)
             ax.add_patch(
                 Circle(scenario.ego.start.as_tuple()[:2], scenario.ego.radius, fc="none", ec="b", lw=1)
             )
@@ -186,13 +189,13 @@ def velocities(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: P
                     v,
                     where="post",
                     color=style["color"],
-                    ls="-" if k == 0 else "--",
+                    ls="-" if k == 0 else DASHES[level],
                     lw=2.2 if k == 0 else 1.3,
                     label=f"{level}, eps {r['epsilon']:g}{twin}",
                     zorder=3 if twin else 2,
                 )
                 if r["collided"]:
-                    ax.plot(t[-1], v[-1], "x", color=style["color"], ms=10, mew=2.5, zorder=4)
+                    ax.plot(t[-1], v[-1], "x", color=style["color"], ms=style["cross"], mew=2, zorder=4)
         ax.axhline(scenario.ego.v_ref, color="k", lw=0.8, ls=":", label="v_ref")
         handles, _ = ax.get_legend_handles_labels()
         collision = Line2D([], [], ls="none", marker="x", color="k", ms=8, mew=2, label="collision")
@@ -201,7 +204,7 @@ def velocities(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: P
         ax.set_xlabel("t [s]")
         ax.set_ylabel("v [m/s]")
         ax.grid(alpha=0.3)
-    fig.suptitle("Fig. 4: the ego's applied speed (solid: lowest epsilon, dashed: highest)")
+    fig.suptitle("Fig. 4: the ego's applied speed (solid: lowest epsilon; dashed or dotted: highest)")
     fig.tight_layout()
     path = out / "fig4_velocities.png"
     fig.savefig(path, dpi=110)
