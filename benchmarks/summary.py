@@ -30,8 +30,8 @@ WIDTH = 96
 """Longest line printed [characters]."""
 
 _SEVERITY_WHY = {
-    "paper": "the paper's severity 0.5|m_e v_e^2 - m_o v_o^2| is zero at matched kinetic energies,"
-    " so the SMPC slows to the object's speed and drives into it",
+    "paper": "the paper's severity is zero at matched kinetic energies, so the SMPC slows to the"
+    " object's speed and drives into it",
     "plastic": "a plastic impact at relative speed u costs 0.5 m_e m_o/(m_e+m_o) u^2, so epsilon"
     " admits slow bumps, and the SMPC uses them",
     "probability": "epsilon bounds each step's collision probability, which the SMPC spends",
@@ -118,19 +118,16 @@ def why(claims: list[str], rows: list[dict[str, Any]]) -> str:
         for (level, eps), found in list(cases.items())[:2]:
             r = index[("RMPC", rmpc, level, eps)]
             parts.append(
-                f"{level}/{eps:g}{_unit(rows)}: SMPC {', '.join(found)} against the {rmpc} RMPC's"
+                f"{level}/{eps:g}{_unit(rows)}: SMPC {', '.join(found)}, {rmpc} RMPC"
                 f" {r['e_acc']:.1f}/{r['d_min']:.1f} m"
             )
-        text = "; ".join(parts)
         failed = sum(
             int(r["failed_solves"]) for r in rows if (r["method"], r["risk_method"]) == ("RMPC", rmpc)
         )
-        stall = (
-            f" (its staircase constraint stalls the solver: {failed} failed solves)" if rmpc == "grid" else ""
-        )
+        stall = f" (its solver stalls: {failed} failed solves)" if rmpc == "grid" and failed else ""
         return (
-            f"{text} (e_acc/d_min): at epsilon = 0 the SMPC keeps clear of the object's whole truncation"
-            f" box (or all its draws), like the exact worst case; the {rmpc} RMPC keeps less there{stall}."
+            f"{'; '.join(parts)} (e_acc/d_min): at epsilon = 0 the SMPC keeps clear of the whole"
+            f" truncation box, like the exact worst case; the {rmpc} RMPC keeps less{stall}."
             f" {DOCS}{ANCHORS['claims']}"
         )
     if claims == ["No run collides"]:
