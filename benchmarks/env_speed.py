@@ -1,6 +1,9 @@
 """How fast is ``RiskCrossing-v0``? Env steps per risk estimator, and the risk estimators alone.
 
-``python -m benchmarks.env_speed [--steps N] [--repeat R] [--batch B]`` prints one table:
+    python -m benchmarks.env_speed --repeat 10 --out docs/results/env_speed.txt
+    python -m benchmarks.env_speed --repeat 10 --near-only --out docs/results/env_speed_near.txt
+
+It prints one table (and writes it to ``--out``):
 
 - env: steps/s and us/step of the unwrapped env under a constant action (v_ref straight ahead,
   which passes close to the object), resetting on termination; ``exact, sampled`` is the exact
@@ -17,10 +20,12 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
+from benchmarks import cli
 from risk_env import ENV_ID, ESTIMATOR_NAMES, Scenario, make_estimator, predict
 from risk_env.risk import signed_box_distance
 
@@ -95,22 +100,40 @@ def risk_times(
     return t_single, t_batch
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog="python -m benchmarks.env_speed", description=__doc__.split("\n\n")[0]
-    )
-    parser.add_argument("--steps", type=int, default=2000, help="env steps per repetition (default 2000)")
-    parser.add_argument("--repeat", type=int, default=5, help="repetitions; the best is shown (default 5)")
-    parser.add_argument("--batch", type=int, default=1000, help="ego states in the batch (default 1000)")
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.env_speed``."""
+    parser = cli.parser("env_speed", __doc__)
+    parser.add_argument("--steps", type=int, default=2000, help="env steps per repetition")
+    parser.add_argument("--repeat", type=int, default=5, help="repetitions; the best is shown")
+    parser.add_argument("--batch", type=int, default=1000, help="ego states in the batch")
     parser.add_argument(
-        "--near-only", action="store_true", help="batch only ego states whose disc meets the truncation box"
+        "--near-only",
+        action="store_true",
+        help="batch only ego states whose disc meets the truncation box (default: uniform within 6 m)",
     )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="also write the table to this file (default: print only; the committed tables are"
+        " docs/results/env_speed.txt and env_speed_near.txt)",
+    )
+    return parser
+
+
+def main(argv: list[str] | None = None) -> str:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.steps < 1 or args.repeat < 1 or args.batch < 1:
         parser.error("--steps, --repeat and --batch must be >= 1")
 
+    def show(line: str) -> None:
+        print(line, flush=True)
+        lines.append(line)
+
+    lines: list[str] = []
     scenario = Scenario.preset("low")
-    print(
+    show(
         f"RiskCrossing-v0 speed (numpy {np.__version__}, "
         f"J = {scenario.mc_samples}, L = {scenario.grid_points}; best of {args.repeat})"
     )
@@ -118,16 +141,21 @@ def main(argv: list[str] | None = None) -> None:
         f"{'estimator':<16}{'env steps/s':>13}{'us/step':>10}"
         f"{'risk, 1 state [us]':>21}{f'risk, {args.batch} states [ms]':>24}"
     )
-    print(header)
-    print("-" * len(header))
+    show(header)
+    show("-" * len(header))
     for name in ESTIMATOR_NAMES:
         t_step = env_step_time(name, args.steps, args.repeat)
         t_single, t_batch = risk_times(name, scenario, args.batch, args.repeat, args.near_only)
         risk_cols = f"{1e6 * t_single:>21.1f}{1e3 * t_batch:>24.2f}"
-        print(f"{name:<16}{1.0 / t_step:>13,.0f}{1e6 * t_step:>10.1f}{risk_cols}")
+        show(f"{name:<16}{1.0 / t_step:>13,.0f}{1e6 * t_step:>10.1f}{risk_cols}")
     for label, estimator, motion in (("exact, sampled", "exact", "sampled"), ("(no risk)", "none", "paper")):
         t_step = env_step_time(estimator, args.steps, args.repeat, motion)
-        print(f"{label:<16}{1.0 / t_step:>13,.0f}{1e6 * t_step:>10.1f}{'-':>21}{'-':>24}")
+        show(f"{label:<16}{1.0 / t_step:>13,.0f}{1e6 * t_step:>10.1f}{'-':>21}{'-':>24}")
+    text = "\n".join(lines) + "\n"
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text)
+    return text
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import cli
 from benchmarks.rollout import AGENTS, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
 from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
@@ -197,12 +198,13 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.sampled", description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.sampled``."""
+    p = cli.parser("sampled", __doc__)
     p.add_argument(
         "--agents",
         default=None,
-        help=f"comma list from {list(AGENTS)} (default: all but the grid RMPC; PPO with the rl extra)",
+        help=f"comma list from {', '.join(AGENTS)} (default: all but the grid RMPC; PPO with the rl extra)",
     )
     p.add_argument("--severities", default="paper,plastic", help=f"comma list of {', '.join(SEVERITY_NAMES)}")
     p.add_argument("--uncertainty", default="medium", help="comma list of low, medium, high")
@@ -213,11 +215,29 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="comma list of epsilon in the severity's own unit (default 0,1000,2500); repeat as"
         " SEVERITY=EPS,... to give a severity its own list",
     )
-    p.add_argument("--episodes", type=int, default=200, help="episodes per configuration (default 200)")
+    p.add_argument("--episodes", type=int, default=200, help="seeded episodes per configuration")
     p.add_argument("--chunk", type=int, default=25, help="episodes per job (one agent build per job)")
-    p.add_argument("--out", type=Path, default=Path("results"))
-    p.add_argument("--workers", type=int, default=None)
-    p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results"),
+        help="output folder for sampled.csv and sampled.md; the committed ones are in docs/results",
+    )
+    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=False,
+        metavar="ADDRESS",
+        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
+        " (default: a process pool)",
+    )
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
     args = p.parse_args(argv)
     if args.agents is None:
         args.agents = [a for a in available_agents() if a != "rmpc:grid"]

@@ -1,10 +1,13 @@
-"""The paper's Table II: RMPC and SMPC x low/medium/high uncertainty x six risk tolerances.
+"""The paper's Table II: RMPC and SMPC x low/medium/high uncertainty x six risk tolerances, for
+each risk method, and the shipped PPO policies on the same 36 configurations.
 
-    python -m benchmarks.table2                      # all risk methods, results/ folder
+    python -m benchmarks.table2                      # every agent, written to results/
     python -m benchmarks.table2 --methods rmpc:worst_case,smpc:exact --uncertainty low
 
 Writes ``table2.csv`` (one row per run), ``table2.md`` (our figures beside the paper's, the claims
-checklist, timing), ``table2_runs.npz`` (every trajectory) and the Fig. 3/4 PNGs.
+checklist, timing), ``table2_runs.npz`` (every trajectory), ``table2_meta.json`` and the Fig. 3/4
+PNGs. The terminal gets a one-screen summary (:func:`summary`): runs, collisions and failed solves
+per agent, and the paper's claims, with a reason for each one that does not hold.
 """
 
 from __future__ import annotations
@@ -19,8 +22,10 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import cli
 from benchmarks.paper_table2 import PAPER, TOLERANCES
 from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_agent, rollout
+from benchmarks.summary import summary
 from benchmarks.sweep import run_sweep
 from risk_env.scenario import SEVERITY_NAMES, Scenario
 
@@ -221,7 +226,8 @@ def markdown(
     levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
     for method, risk in groups:
         kind = "training" if method == "PPO" else "risk"
-        lines += ["", f"## {method}, {kind}: {risk}", ""]
+        section = f"{method.lower()}-{risk}"  # a pymdownx.snippets section, for the docs
+        lines += ["", f"## {method}, {kind}: {risk}", "", f"<!-- --8<-- [start:{section}] -->"]
         header = "| eps | " + " | ".join(f"{lv} e_acc | {lv} d_min" for lv in levels) + " |"
         lines += [header, "|" + " --- |" * (1 + 2 * len(levels))]
         for eps in sorted({r["epsilon"] for r in rows}):
@@ -241,11 +247,12 @@ def markdown(
                 cells.append(f"{r['e_acc']:.1f}{star} ({_fmt(r['paper_e_acc'])})")
                 cells.append(f"{r['d_min']:.1f}{star} ({_fmt(r['paper_d_min'])})")
             lines.append(f"| {eps:g} | " + " | ".join(cells) + " |")
-    lines += ["", "## The paper's claims", ""]
+        lines.append(f"<!-- --8<-- [end:{section}] -->")
+    lines += ["", "## The paper's claims", "", "<!-- --8<-- [start:claims] -->"]
     for claim, ok, evidence in claims:
         verdict = "holds" if ok else ("not run" if ok is None else "**does not hold**")
         lines.append(f"- {claim}: {verdict} ({evidence})")
-    lines += ["", "## Timing", ""]
+    lines += ["<!-- --8<-- [end:claims] -->", "", "## Timing", "", "<!-- --8<-- [start:timing] -->"]
     lines.append(
         "| method | risk | runs | wall [s] | solve median [ms] | solve p95 [ms] | solve max [ms] | failed |"
     )
@@ -258,6 +265,7 @@ def markdown(
             f"{max(r['solve_ms_p95'] for r in sel):.1f} | "
             f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)} |"
         )
+    lines.append("<!-- --8<-- [end:timing] -->")
     return "\n".join(lines) + "\n"
 
 
@@ -279,14 +287,15 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
         writer.writerows(rows)
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.table2", description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.table2``."""
+    p = cli.parser("table2", __doc__)
     p.add_argument(
         "--methods",
         default=None,
-        help=f"comma list of {', '.join(METHODS)} (default: all; PPO when the rl extra is installed)",
+        help=f"comma list of agents, from {', '.join(METHODS)} (default: all; PPO needs the rl extra)",
     )
-    p.add_argument("--uncertainty", default="low,medium,high", help="comma list of low, medium, high")
+    p.add_argument("--uncertainty", default="low,medium,high", help="comma list of Table I levels")
     p.add_argument(
         "--tolerances",
         default=",".join(f"{t:g}" for t in TOLERANCES),
@@ -295,11 +304,35 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--v-ref", type=float, default=None, help="reference speed [m/s] (default: the Scenario's, 4)"
     )
-    p.add_argument("--severity", default=None, choices=SEVERITY_NAMES, help="severity model (default: paper)")
-    p.add_argument("--out", type=Path, default=Path("results"), help="output folder (default: results/)")
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS", help="run on Ray")
+    p.add_argument(
+        "--severity",
+        default=None,
+        choices=SEVERITY_NAMES,
+        help="severity model (default: the Scenario's, paper); a severity other than paper needs"
+        " --tolerances in its own unit",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results"),
+        help="output folder; the committed results are rebuilt with --out docs/results",
+    )
+    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=False,
+        metavar="ADDRESS",
+        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
+        " (default: a process pool)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
     args = p.parse_args(argv)
     if args.methods is None:
         args.methods = available_agents()
@@ -357,13 +390,12 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     (args.out / "table2_meta.json").write_text(
         json.dumps({"wall_s": wall, "args": _jsonable(vars(args))}, indent=2)
     )
-    written = [args.out / "table2.csv", args.out / "table2.md", args.out / "table2_runs.npz"]
+    written = [args.out / "table2.csv", args.out / "table2_runs.npz", args.out / "table2_meta.json"]
     if not args.no_figures:
         from benchmarks.figures import paper_figures
 
         written += paper_figures(rows, arrays, args.out)
-    print(markdown(rows, claims, wall))
-    print("Wrote:\n" + "\n".join(f"  {p}" for p in written))
+    print(summary(rows, claims, wall, args.out / "table2.md", written))
     return rows
 
 

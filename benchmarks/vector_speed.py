@@ -1,7 +1,7 @@
 """Throughput of the vectorised ``RiskCrossing-v0``: env steps per second by vectorisation mode.
 
     python -m benchmarks.vector_speed                      # 64 copies, the three modes, exact risk
-    python -m benchmarks.vector_speed --num-envs 1 8 64 --modes vector_entry_point
+    python -m benchmarks.vector_speed --num-envs 1 8 64 --out docs/results
 
 Random actions (the same for every mode) drive the copies, with seeded variations of the
 scenario (``randomize=True``) so that the batch holds states near and far from the object.
@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 import risk_env
+from benchmarks import cli
 
 MODES = ("vector_entry_point", "sync", "async")
 
@@ -38,18 +39,44 @@ def throughput(mode: str, num_envs: int, steps: int, repeats: int, **env_kwargs)
     return steps * num_envs / best
 
 
-def main(argv: list[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.vector_speed``."""
+    parser = cli.parser("vector_speed", __doc__)
+    parser.add_argument("--num-envs", type=int, nargs="+", default=[64], help="batch sizes (copies) to time")
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        choices=MODES,
+        default=list(MODES),
+        metavar="MODE",
+        help=f"vectorisation modes, of {', '.join(MODES)}: the batched numpy env, or Gymnasium's"
+        " vectors of single envs",
     )
-    parser.add_argument("--num-envs", type=int, nargs="+", default=[64])
-    parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
-    parser.add_argument("--estimators", nargs="+", choices=risk_env.ESTIMATOR_NAMES, default=["exact"])
-    parser.add_argument("--object-motion", choices=risk_env.OBJECT_MOTIONS, default="sampled")
+    parser.add_argument(
+        "--estimators",
+        nargs="+",
+        choices=risk_env.ESTIMATOR_NAMES,
+        default=["exact"],
+        metavar="ESTIMATOR",
+        help=f"risk estimators, of {', '.join(risk_env.ESTIMATOR_NAMES)}",
+    )
+    parser.add_argument(
+        "--object-motion", choices=risk_env.OBJECT_MOTIONS, default="sampled", help="how the object moves"
+    )
     parser.add_argument("--steps", type=int, default=200, help="batch steps per run")
-    parser.add_argument("--repeats", type=int, default=3, help="runs per row (best is kept)")
-    parser.add_argument("--out", type=Path, default=None, help="also write the table to OUT/vector_speed.txt")
-    args = parser.parse_args(argv)
+    parser.add_argument("--repeats", type=int, default=3, help="runs per row (the best is kept)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="also write the table to OUT/vector_speed.txt (default: print only; the committed one"
+        " is in docs/results)",
+    )
+    return parser
+
+
+def main(argv: list[str] | None = None) -> str:
+    args = build_parser().parse_args(argv)
 
     lines = [
         f"RiskCrossing-v0 vectorised throughput (randomize=True, object_motion={args.object_motion},"

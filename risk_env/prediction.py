@@ -1,4 +1,4 @@
-"""The object's prediction over the horizon (paper Sec. VI-C, with the SPEC's centring).
+"""The object's prediction over the horizon (paper Sec. VI-C, the truncation centred on the predicted mean).
 
 From a measurement ``(c1, c2, theta, v, omega)`` the mean follows the unicycle with the measured,
 constant inputs. At step n the position and the speed are independent truncated Gaussians:
