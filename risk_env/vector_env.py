@@ -4,9 +4,10 @@ one estimator call.
 ``gym.make_vec("RiskCrossing-v0", num_envs=64)`` builds it (the spec's ``vector_entry_point``);
 ``vectorization_mode="sync"`` or ``"async"`` builds Gymnasium's vector envs of single envs
 instead. Copy i behaves exactly like ``gym.make("RiskCrossing-v0", ...)`` reset with
-``seed + i``: the same arguments, its own generator drawn in the same order, the same transition
-(:mod:`risk_env.transition`). Tests hold the three modes to the same numbers (to 1e-9: the
-exact risk of one state and of a batch run through two numpy kernels that agree to ~1e-11).
+``seed + i``: the same arguments, its own generator drawn in the same order (for many copies
+all at once, :mod:`risk_env.pcg64`), the same transition (:mod:`risk_env.transition`: numpy arrays
+here, Python floats in the single env and for batches of up to :data:`SCALAR_COPIES`). Tests hold
+the modes to the same numbers to 1e-12 (risks: 1e-12 in probability).
 """
 
 from __future__ import annotations
@@ -80,6 +81,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._generators = GeneratorBatch(n)
         self._path = PathBatch(np.full(n, s.path.curvature), s.path.goal)  # vary keeps the goal
         self._state = np.zeros((_STATE, n))  # observation rows 0..9, headings unwrapped
+        self._spare = np.zeros((_STATE, n))
         self._start = np.array(
             (*s.ego.start.as_tuple(), *s.ego.initial_input, *s.object.start.as_tuple())
             + (s.object.speed, s.object.turn_rate)
@@ -194,7 +196,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         s, state = self.base_scenario, self._state
         v, omega = a[:, 0], a[:, 1]
         # 1. the ego moves
-        new = np.empty_like(state)
+        new = self._spare  # the state after the step, written over the one before last
         new[0], new[1], new[2] = dynamics.unicycle_step(state[0], state[1], state[2], v, omega, s.dt, NUMPY)
         new[3], new[4] = v, omega
         # 2. the object moves; B = its one-step belief from the measurement before the move
@@ -205,7 +207,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         # 3. the risk R_{k+1|k} of the ego's new state against B
         risk = self._risk(new[0:4].T, belief, active)
         if active is None:
-            self._state = new
+            self._state, self._spare = new, state
             self._steps += 1
         else:
             np.copyto(state, new, where=active)
@@ -229,7 +231,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             generators.give_back(i)
             rows[i] = [*pose, v, omega, *moved]
             self._steps[i] += 1
-        self._state = np.array(rows).T.copy()
+        self._state[:] = np.array(rows).T
         return np.array(risk)
 
     def close_extras(self, **kwargs: Any) -> None:
