@@ -81,8 +81,9 @@ class Ops:
         error there (a^4/120 < 1e-18) is below rounding. numpy arrays take sin(a)/a all the way
         down (within an ulp of it, in a third of the calls)."""
         if isinstance(a, np.ndarray) and a.ndim:
-            out = np.ones_like(a)
-            return np.divide(np.sin(a), a, out=out, where=a != 0.0)
+            if a.all():
+                return np.sin(a) / a
+            return np.divide(np.sin(a), a, out=np.ones_like(a), where=a != 0.0)
         small = self.abs(a) < 1e-4
         a_safe = self.where(small, 1.0, a)
         return self.where(small, 1.0 - a * a / 6.0, self.sin(a_safe) / a_safe)
@@ -135,9 +136,12 @@ def _np_stack(values: list[Any]) -> np.ndarray:
 
 def _np_pack(values: list[Any]) -> np.ndarray:
     shape = _batch_shape(values)
-    rows = np.empty((len(values), *shape))
-    for i, v in enumerate(values):
-        rows[i] = v
+    if shape and all(type(v) is np.ndarray and v.shape == shape for v in values):
+        rows = np.array(values, dtype=float)  # one call for equal arrays
+    else:
+        rows = np.empty((len(values), *shape))
+        for i, v in enumerate(values):
+            rows[i] = v
     if not shape:
         return rows
     if len(shape) == 1:

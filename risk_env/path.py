@@ -100,6 +100,8 @@ def project(path: AnyPath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
     # the angle subtended at the arc's centre, atan2(k px, 1 - k py), over k; px on a line
     if isinstance(k, np.ndarray):
         straight = k == 0.0
+        if not straight.any():
+            return ops.atan2(k * px, 1.0 - k * py) / k
         lam = ops.atan2(k * px, 1.0 - k * py) / np.where(straight, 1.0, k)
         return np.where(straight, px, lam)
     if k == 0.0:

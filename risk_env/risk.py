@@ -174,9 +174,10 @@ class RiskEstimator(ABC):
         return f"{type(self).__name__}(severity={self.severity.name!r})"
 
 
-SCALAR_LOOP_MAX = 4
+SCALAR_LOOP_MAX = 8
 """Up to this many states near the box, :class:`ExactRisk` integrates them one by one with the
-scalar kernel rather than the batch kernel, whose fixed cost exceeds a few scalar calls."""
+scalar kernel (~20 us each) rather than the batch kernel, whose fixed cost (~150 us) exceeds a few
+scalar calls."""
 
 
 class ExactRisk(RiskEstimator):
@@ -226,7 +227,9 @@ class ExactRisk(RiskEstimator):
             a = np.asarray(a, dtype=float)
             if a.ndim == 0:
                 return a
-            a = np.broadcast_to(a, shape).reshape(-1)
+            if a.shape != shape:
+                a = np.broadcast_to(a, shape)
+            a = a.reshape(-1)
             return a if index is None else a[index]
 
         p = disc_probability_batch(

@@ -8,7 +8,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import risk_env
-from risk_env.pcg64 import GeneratorBatch
+from risk_env.pcg64 import VECTORIZED_MIN, GeneratorBatch
 from risk_env.vector_env import SCALAR_COPIES, RiskCrossingVectorEnv
 
 TOL = 1e-12
@@ -101,19 +101,20 @@ def test_vectorised_generators_draw_what_each_copy_draws() -> None:
 
 
 def test_large_batch_takes_the_vectorised_generators_and_agrees() -> None:
-    """64 copies: numpy path and batched generators by default; copies 0 and 63 against single envs."""
+    """128 copies: numpy path and batched generators by default; two copies against single envs."""
     kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 25, "uncertainty": "high"}
-    env = gym.make_vec(risk_env.ENV_ID, 64, "vector_entry_point", **kwargs)
-    assert env.unwrapped._generators._batch is not None and env.unwrapped.scalar_copies < 64
-    actions = np.random.default_rng(3).uniform([-1.0, -0.8], [8.0, 0.8], (60, 64, 2)).astype(np.float32)
+    n = VECTORIZED_MIN
+    env = gym.make_vec(risk_env.ENV_ID, n, "vector_entry_point", **kwargs)
+    assert env.unwrapped._generators._batch is not None and env.unwrapped.scalar_copies < n
+    actions = np.random.default_rng(3).uniform([-1.0, -0.8], [8.0, 0.8], (60, n, 2)).astype(np.float32)
     obs, _ = env.reset(seed=100)
-    singles = [gym.make(risk_env.ENV_ID, **kwargs) for _ in (0, 63)]
-    first = [single.reset(seed=100 + i)[0] for single, i in zip(singles, (0, 63), strict=True)]
-    np.testing.assert_allclose(obs[[0, 63]], first, rtol=TOL)
+    singles = [gym.make(risk_env.ENV_ID, **kwargs) for _ in (0, n - 1)]
+    first = [single.reset(seed=100 + i)[0] for single, i in zip(singles, (0, n - 1), strict=True)]
+    np.testing.assert_allclose(obs[[0, n - 1]], first, rtol=TOL)
     ended = np.zeros(2, dtype=bool)
     for action in actions:
         obs, reward, terminated, truncated, info = env.step(action)
-        for j, i in enumerate((0, 63)):
+        for j, i in enumerate((0, n - 1)):
             if ended[j]:  # next-step autoreset: this step reset the copy
                 expected = singles[j].reset()[0]
                 np.testing.assert_allclose(obs[i], expected, rtol=TOL, atol=TOL)
