@@ -58,6 +58,11 @@ def _mul_high(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return high
 
 
+def _check_count(count: int) -> None:
+    if not 1 <= count <= MAX_DRAWS:
+        raise ValueError(f"count must be in [1, {MAX_DRAWS}], got {count}")
+
+
 class PCG64Batch:
     """The states of ``size`` PCG64 generators, advanced together.
 
@@ -95,23 +100,22 @@ class PCG64Batch:
     def random(self, count: int, mask: np.ndarray | None = None) -> np.ndarray:
         """``(size, count)`` doubles on [0, 1): row i is what ``Generator.random(count)`` of
         generator i returns. Generators off ``mask`` (a ``(size,)`` bool array) do not advance,
-        and their rows are to be ignored."""
-        if not 1 <= count <= MAX_DRAWS:
-            raise ValueError(f"count must be in [1, {MAX_DRAWS}], got {count}")
+        and their rows are to be ignored (every generator is computed: for masks of most)."""
+        _check_count(count)
+        high, low, out = self._advance(count, self.high, self.low, slice(None))
         if mask is None:
-            self.high, self.low, out = self._advance(count, self.high, self.low, slice(None))
-            return out.T
-        index = np.flatnonzero(mask)
-        if 2 * len(index) > len(mask):  # most of them: compute all, keep those of the mask
-            high, low, out = self._advance(count, self.high, self.low, slice(None))
+            self.high, self.low = high, low
+        else:
             np.copyto(self.high, high, where=mask)
             np.copyto(self.low, low, where=mask)
-            return out.T
-        high, low, draws = self._advance(count, self.high[index], self.low[index], index)
+        return out.T
+
+    def random_at(self, count: int, index: np.ndarray) -> np.ndarray:
+        """``(len(index), count)``: the draws of the generators ``index`` alone (for a few)."""
+        _check_count(count)
+        high, low, out = self._advance(count, self.high[index], self.low[index], index)
         self.high[index], self.low[index] = high, low
-        out = np.zeros((len(mask), count))
-        out[index] = draws.T
-        return out
+        return out.T
 
     def _advance(
         self, count: int, s_hi: np.ndarray, s_lo: np.ndarray, columns: slice | np.ndarray
@@ -175,6 +179,15 @@ class GeneratorBatch:
             for i in np.flatnonzero(mask).tolist():
                 self.generators[i].random(out=rows[i])
         return buffer
+
+    def random_at(self, count: int, index: np.ndarray) -> np.ndarray:
+        """``(len(index), count)``: :meth:`random` of the generators ``index`` alone."""
+        if self._batch is not None:
+            return self._batch.random_at(count, index)
+        out = np.empty((len(index), count))
+        for row, i in zip(out, index.tolist(), strict=True):
+            self.generators[i].random(out=row)
+        return out
 
     def borrow(self, index: int) -> np.random.Generator:
         """Copy ``index``'s generator, up to date, for a direct use; hand it back with

@@ -246,7 +246,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             return
         index = np.flatnonzero(mask)
         # each copy's own generator, DRAWS uniforms on [-1, 1) as vary takes them (bit for bit)
-        u = self._generators.random(DRAWS, mask)[index].T * 2.0 - 1.0
+        u = self._generators.random_at(DRAWS, index).T * 2.0 - 1.0
         start = draw(self.base_scenario, u, self.variations, NUMPY)
         self._path.curvature[index] = start.curvature
         state = self._state

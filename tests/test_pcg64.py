@@ -27,6 +27,8 @@ def test_batch_draws_equal_each_generators_draws_under_masks() -> None:
         assert draws.shape == (len(seeds), count)
         for i in range(len(seeds)) if mask is None else np.flatnonzero(mask):
             np.testing.assert_array_equal(draws[i], refs[i].random(count))  # bit for bit
+        index = np.flatnonzero(rng.random(len(seeds)) < 0.2)  # a few generators alone
+        np.testing.assert_array_equal(batch.random_at(count, index), [refs[i].random(count) for i in index])
     last = batch.random(1)  # the generators off the masks did not advance either
     assert all(last[i, 0] == g.random() for i, g in enumerate(refs))
 
@@ -61,6 +63,7 @@ def test_generator_batch_loop_and_vectorised_agree(vectorized: bool) -> None:
     draws = gens.random(3, mask)
     for i in np.flatnonzero(mask):
         np.testing.assert_array_equal(draws[i], refs[i].random(3))
+    np.testing.assert_array_equal(gens.random_at(8, np.array([4, 0])), [refs[4].random(8), refs[0].random(8)])
     g = gens.borrow(1)  # a direct use in between (Monte Carlo draws)
     np.testing.assert_array_equal(g.random(5), refs[1].random(5))
     gens.give_back(1)
