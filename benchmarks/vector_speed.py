@@ -8,7 +8,8 @@ Random actions (the same for every mode) drive the copies, with seeded variation
 (``randomize=True``) so that the batch holds states near and far from the object; sampled object
 motion by default. Per row: the batch step [us], env steps/s, us per env step and that as a
 multiple of one ``gym.make("CartPole-v1")`` and ``gym.make("Pendulum-v1")`` step (seeded random
-actions, timed before and after the rows; the best is kept). Modes: ``vector_entry_point`` (our
+actions). Each round runs every row (and the references) once, so that a busy spell of a shared
+machine slows them alike; shown is each row's best round. Modes: ``vector_entry_point`` (our
 batched env; up to :data:`~risk_env.vector_env.SCALAR_COPIES` copies it steps them one by one in
 Python floats), ``numpy`` (the same env held to its numpy path, shown up to 64 copies), Gymnasium's
 ``sync`` and ``async`` vector envs of single envs (up to ``--max-wrapped`` copies), and
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
@@ -35,8 +37,9 @@ batch sizes; and a fixed cost of at most :data:`FIXED_COST` [s]."""
 FIXED_COST = 100e-6
 
 
-def batch_step_time(mode: str, num_envs: int, steps: int, repeats: int, **env_kwargs) -> float:
-    """Best of ``repeats`` runs of ``steps`` batch steps: seconds per batch step."""
+def batch_stepper(mode: str, num_envs: int, steps: int, **env_kwargs) -> tuple[Callable[[], float], gym.Env]:
+    """A function timing ``steps`` batch steps of a fresh episode (seconds per batch step) of
+    ``mode`` with ``num_envs`` copies, and the env (to close)."""
     if mode == "CartPole-v1":
         env = gym.make_vec(mode, num_envs=num_envs, vectorization_mode="vector_entry_point")
     else:
@@ -47,15 +50,15 @@ def batch_step_time(mode: str, num_envs: int, steps: int, repeats: int, **env_kw
     space = env.single_action_space
     space.seed(0)
     actions = np.array([[space.sample() for _ in range(num_envs)] for _ in range(steps)])
-    best = np.inf
-    for _ in range(repeats):
+
+    def run() -> float:
         env.reset(seed=0)
         start = time.perf_counter()
         for action in actions:
             env.step(action)
-        best = min(best, (time.perf_counter() - start) / steps)
-    env.close()
-    return best
+        return (time.perf_counter() - start) / steps
+
+    return run, env
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -79,9 +82,10 @@ def main(argv: list[str] | None = None) -> str:
         parser.error("--num-envs, --steps and --repeats must be >= 1")
 
     reference_steps = 2000
-    envs = {name: stepper(name, reference_steps) for name in REFERENCES}
-    ref = step_times(envs, reference_steps, args.repeats)
-    rows: list[tuple[str, str, int, float]] = []
+    references = {name: stepper(name, reference_steps) for name in REFERENCES}
+    ref = dict.fromkeys(REFERENCES, float("inf"))
+    rows: dict[tuple[str, str, int], float] = {}
+    runners = {}
     for estimator in args.estimators:
         for num_envs in args.num_envs:
             for mode in args.modes:
@@ -92,11 +96,17 @@ def main(argv: list[str] | None = None) -> str:
                 if mode == "CartPole-v1" and estimator != args.estimators[0]:
                     continue
                 kwargs = {"risk_estimator": estimator, "randomize": True, "object_motion": args.object_motion}
-                t = batch_step_time(mode, num_envs, args.steps, args.repeats, **kwargs)
-                rows.append((mode, "-" if mode == "CartPole-v1" else estimator, num_envs, t))
-                print(f"  {mode} {estimator} {num_envs}: {1e6 * t:.1f} us per batch step", flush=True)
-    for name, t in step_times(envs, reference_steps, args.repeats).items():
-        ref[name] = min(ref[name], t)
+                key = (mode, "-" if mode == "CartPole-v1" else estimator, num_envs)
+                runners[key] = batch_stepper(mode, num_envs, args.steps, **kwargs)
+                rows[key] = float("inf")
+    for round_ in range(args.repeats):  # every row once per round: a busy spell slows them alike
+        for name, t in step_times(references, reference_steps, 1).items():
+            ref[name] = min(ref[name], t)
+        for key, (run, _) in runners.items():
+            rows[key] = min(rows[key], run())
+        print(f"  round {round_ + 1}/{args.repeats} done", flush=True)
+    for _, env in runners.values():
+        env.close()
     cartpole, pendulum = (ref[name] for name in REFERENCES)
 
     lines = [
@@ -110,7 +120,7 @@ def main(argv: list[str] | None = None) -> str:
         f"{'mode':>20} {'estimator':>10} {'copies':>7} {'batch step [us]':>16} {'env steps/s':>12}"
         f" {'us/env step':>12} {'x CartPole':>11} {'x Pendulum':>11}",
     ]
-    for mode, estimator, num_envs, t in rows:
+    for (mode, estimator, num_envs), t in rows.items():
         per = t / num_envs
         lines.append(
             f"{mode:>20} {estimator:>10} {num_envs:>7} {1e6 * t:>16.1f} {1.0 / per:>12,.0f}"
@@ -125,12 +135,12 @@ def main(argv: list[str] | None = None) -> str:
     return text
 
 
-def summary(rows: list[tuple[str, str, int, float]], estimators: list[str], pendulum: float) -> list[str]:
+def summary(rows: dict[tuple[str, str, int], float], estimators: list[str], pendulum: float) -> list[str]:
     """Fixed cost and cost per copy of the batched env per estimator, and issue 15's targets."""
     out = []
     for estimator in estimators:
         for mode in ("vector_entry_point", "numpy"):
-            times = {n: t for m, e, n, t in rows if m == mode and e == estimator}
+            times = {n: t for (m, e, n), t in rows.items() if m == mode and e == estimator}
             if not times:
                 continue
             lo, hi = min(times), max(times)

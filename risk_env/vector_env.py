@@ -360,9 +360,10 @@ class RiskCrossingVectorEnv(VectorEnv):
         }
 
 
-SCALAR_COPIES = 4
-"""Up to this many copies, a batch step runs each copy through the single env's float code:
-numpy's fixed cost (a hundred-odd calls of ~0.5 us on tiny arrays) exceeds a few copies' cost."""
+SCALAR_COPIES = 7
+"""Up to this many copies, a batch step runs each copy through the single env's float code (~25 us
+a copy): numpy's fixed cost (some 250 calls of ~0.7 us on tiny arrays) exceeds a few copies' cost.
+Measured crossover: about 8 copies."""
 _STATE = observation.PROGRESS
 """Rows of the batched state: the observation's entries before lambda."""
 
