@@ -11,6 +11,7 @@ constant inputs. At step n the position and the speed are independent truncated 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from risk_env.dynamics import unicycle_step
 from risk_env.ops import NUMPY, Ops
-from risk_env.scenario import Scenario
+from risk_env.scenario import Scenario, Uncertainty
 from risk_env.truncnorm import sample as truncnorm_sample
 from risk_env.truncnorm import transform as truncnorm_transform
 
@@ -130,19 +131,29 @@ def predict_step(scenario: Scenario, measurement: Any, step: int = 1, ops: Ops =
 
 def _belief(u: Any, n: int, x: Any, y: Any, th: Any, v: Any) -> Belief:
     """The belief at prediction step ``n`` around the mean ``(x, y, th, v)``; spreads of ``u``."""
-    return Belief(
-        x=x,
-        y=y,
-        theta=th,
-        speed=v,
-        sigma_x=u.sigma0[0] + n * u.sigma_growth[0],
-        sigma_y=u.sigma0[1] + n * u.sigma_growth[1],
-        sigma_v=u.sigma0[2] + n * u.sigma_growth[2],
-        half_x=u.box_half_width0[0] + n * u.box_growth[0],
-        half_y=u.box_half_width0[1] + n * u.box_growth[1],
-        v_lo=u.velocity_bounds0[0] - n * u.box_growth[2],
-        v_hi=u.velocity_bounds0[1] + n * u.box_growth[2],
-    )
+    if isinstance(u, Uncertainty):  # numbers: the spreads once per (u, n), a lean constructor
+        belief = object.__new__(Belief)
+        belief.__dict__.update(x=x, y=y, theta=th, speed=v, **_spreads(u, n))
+        return belief
+    return Belief(x, y, th, v, **_spread_formulas(u, n))
+
+
+def _spread_formulas(u: Any, n: int) -> dict[str, Any]:
+    """Standard deviations and truncation bounds at step ``n`` (paper Sec. VI-C, Table I)."""
+    return {
+        "sigma_x": u.sigma0[0] + n * u.sigma_growth[0],
+        "sigma_y": u.sigma0[1] + n * u.sigma_growth[1],
+        "sigma_v": u.sigma0[2] + n * u.sigma_growth[2],
+        "half_x": u.box_half_width0[0] + n * u.box_growth[0],
+        "half_y": u.box_half_width0[1] + n * u.box_growth[1],
+        "v_lo": u.velocity_bounds0[0] - n * u.box_growth[2],
+        "v_hi": u.velocity_bounds0[1] + n * u.box_growth[2],
+    }
+
+
+@functools.lru_cache(maxsize=256)
+def _spreads(u: Uncertainty, n: int) -> dict[str, float]:
+    return _spread_formulas(u, n)
 
 
 def predict_array(scenario: Scenario, measurement: np.ndarray, steps: int | None = None) -> Belief:
