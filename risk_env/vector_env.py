@@ -30,6 +30,7 @@ from risk_env.risk import MonteCarloRisk
 from risk_env.scenario import Scenario
 from risk_env.transition import Observed, advance_one, move_object, observe, reward_terms
 from risk_env.variations import DRAWS, draw
+from risk_env.vector_infos import masked, parse_autoreset_mode, where
 
 
 class RiskCrossingVectorEnv(VectorEnv):
@@ -61,7 +62,7 @@ class RiskCrossingVectorEnv(VectorEnv):
                 "the batched RiskCrossing-v0 does not render; use gym.make_vec(..., vectorization_mode="
                 f"'sync') or gym.make for render_mode={render_mode!r}"
             )
-        mode = _autoreset_mode(autoreset_mode)
+        mode = parse_autoreset_mode(autoreset_mode)
         template = RiskCrossingEnv(**kwargs)  # the single env validates every argument
         self.template = template
         self.base_scenario: Scenario = template.base_scenario
@@ -178,14 +179,14 @@ class RiskCrossingVectorEnv(VectorEnv):
             final_obs = np.full(n, None, dtype=object)
             for i in np.flatnonzero(done):
                 final_obs[i] = obs[i]
-            infos["final_info"] = _masked(infos, done)
+            infos["final_info"] = masked(infos, done)
             infos["_final_info"] = done.copy()
             infos["final_obs"], infos["_final_obs"] = final_obs, done.copy()
             self._reset_copies(done)
             reset_seen = self._observe()
             obs = reset_seen.obs
             fresh = self._infos(reset_seen, np.zeros(n), self._never)
-            infos.update({k: _where(done, fresh[k], infos[k]) for k in fresh if not k.startswith("_")})
+            infos.update({k: where(done, fresh[k], infos[k]) for k in fresh if not k.startswith("_")})
         else:
             self._autoreset = done
         return obs, rewards, terminated, truncated, infos
@@ -246,14 +247,19 @@ class RiskCrossingVectorEnv(VectorEnv):
             return
         index = np.flatnonzero(mask)
         # each copy's own generator, DRAWS uniforms on [-1, 1) as vary takes them (bit for bit)
-        u = self._generators.random_at(DRAWS, index).T * 2.0 - 1.0
-        start = draw(self.base_scenario, u, self.variations, NUMPY)
-        self._path.curvature[index] = start.curvature
+        u = self._generators.random_at(DRAWS, index) * 2.0 - 1.0
+        if len(index) <= self.scalar_copies:  # a few copies: each in Python floats
+            starts = [draw(self.base_scenario, row, self.variations, MATH) for row in u.tolist()]
+            curvature, ego, obj, speed = (np.array(field) for field in zip(*starts, strict=True))
+            ego, obj = ego.T, obj.T
+        else:
+            curvature, ego, obj, speed = draw(self.base_scenario, u.T, self.variations, NUMPY)
+        self._path.curvature[index] = curvature
         state = self._state
-        state[0:3, index] = start.ego
+        state[0:3, index] = ego
         state[3:5, index] = self._start[3:5, None]
-        state[5:8, index] = start.object
-        state[8, index] = start.object_speed
+        state[5:8, index] = obj
+        state[8, index] = speed
         state[9, index] = self._start[9]
         self._steps[index] = 0
 
@@ -366,36 +372,3 @@ a copy): numpy's fixed cost (some 250 calls of ~0.7 us on tiny arrays) exceeds a
 Measured crossover: about 8 copies."""
 _STATE = observation.PROGRESS
 """Rows of the batched state: the observation's entries before lambda."""
-
-
-def _autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
-    """``AutoresetMode`` from itself, its value (``"SameStep"``) or its name (``"same_step"``)."""
-    if isinstance(value, AutoresetMode):
-        return value
-    for mode in AutoresetMode:
-        if value in (mode.value, mode.name, mode.name.lower()):
-            return mode
-    names = [m.name.lower() for m in AutoresetMode]
-    raise ValueError(f"unknown autoreset_mode {value!r}; expected an AutoresetMode or one of {names}")
-
-
-def _masked(infos: dict[str, Any], mask: np.ndarray) -> dict[str, Any]:
-    """A copy of vector ``infos`` whose ``_key`` masks are ``mask`` and whose entries are zero off it
-    (Gymnasium's final_info form)."""
-    out: dict[str, Any] = {}
-    for key, value in infos.items():
-        if key.startswith("_"):
-            out[key] = mask.copy()
-        elif isinstance(value, dict):
-            out[key] = _masked(value, mask)
-        else:
-            out[key] = _where(mask, value, np.zeros_like(value))
-    return out
-
-
-def _where(mask: np.ndarray, new: Any, old: Any) -> Any:
-    """Entries of ``new`` where ``mask`` (per copy), else ``old``; recurses into dicts."""
-    if isinstance(new, dict):
-        return {k: (_where(mask, new[k], old[k]) if not k.startswith("_") else old[k]) for k in new}
-    m = mask.reshape(mask.shape + (1,) * (np.ndim(new) - 1))
-    return np.where(m, new, old)
