@@ -79,7 +79,7 @@ class Ops:
     def sinc(self, a: Any) -> Any:
         """sin(a)/a, smooth and exact through a = 0: below |a| = 1e-4 its Taylor polynomial, whose
         error there (a^4/120 < 1e-18) is below rounding. numpy arrays take sin(a)/a all the way
-        down (within an ulp of it, in a third of the calls)."""
+        down to 0 (within an ulp of the polynomial; a third of its numpy calls)."""
         if type(a) is float:  # the formula below, spelled for one float (no face lookups)
             return math.sin(a) / a if abs(a) >= 1e-4 else 1.0 - a * a / 6.0
         if isinstance(a, np.ndarray) and a.ndim:
@@ -137,6 +137,7 @@ def _np_stack(values: list[Any]) -> np.ndarray:
 
 
 def _np_pack(values: list[Any]) -> np.ndarray:
+    """``values`` as a new C-ordered float64 array ``(*batch, len(values))``."""
     shape = _batch_shape(values)
     if shape and all(type(v) is np.ndarray and v.shape == shape for v in values):
         rows = np.array(values, dtype=float)  # one call for equal arrays
