@@ -18,15 +18,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from risk_env import checks, dynamics, observation
+from risk_env import checks, observation
 from risk_env.checks import ACTION_TOLERANCE, slack  # noqa: F401  (ACTION_TOLERANCE: public here too)
-from risk_env.ops import NUMPY
+from risk_env.ops import MATH
 from risk_env.path import project
-from risk_env.prediction import predict
 from risk_env.renderers import RENDERERS, make_renderer
 from risk_env.risk import RiskEstimator, make_estimator
 from risk_env.scenario import OVERRIDES, Scenario
-from risk_env.transition import move_object, observe, reward_terms
+from risk_env.transition import advance_one, observe, reward_terms
 from risk_env.variations import Variations, vary
 
 ENV_ID = "RiskCrossing-v0"
@@ -294,7 +293,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         s = self.scenario
         self._ego_pose = s.ego.start.as_tuple()
         self._ego_input = s.ego.initial_input
-        self._object = (*s.object.start.as_tuple(), s.object.speed, s.object.turn_rate)
+        self._object = (*s.object.start.as_tuple(), float(s.object.speed), float(s.object.turn_rate))
         self._steps = 0
         self._ended = None
         self._plan = None
@@ -312,23 +311,20 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             raise gym.error.ResetNeeded(f"the episode has ended ({self._ended}); call env.reset() to step on")
         s = self.scenario
         v, omega = self._check_action(action)
-        # 1. the ego moves (dynamics.step's unicycle, called on floats: no array round trip)
-        x, y, theta = dynamics.unicycle_step(*self._ego_pose, v, omega, s.dt, NUMPY)
-        self._ego_pose = (float(x), float(y), float(theta))
+        # 1.-3. the ego moves (dynamics.step's unicycle); the object moves from its one-step
+        # belief B, made from its measurement before the move; the risk R_{k+1|k} of the ego's new
+        # state against B. Python floats throughout: numpy's per-call cost would dominate.
+        uniforms = self.np_random.random(3).tolist() if self.object_motion == "sampled" else None
+        self._ego_pose, self._object, risk = advance_one(
+            s, self.estimator, self._ego_pose, (v, omega), self._object, uniforms, self.np_random
+        )
         self._ego_input = (v, omega)
-        # 2. the object moves; B = its one-step belief from the measurement before the move
-        belief = predict(s, self._object, steps=1)[1]
-        uniforms = self.np_random.random(3) if self.object_motion == "sampled" else None
-        self._object = tuple(float(a) for a in move_object(belief, self._object, uniforms))
-        # 3. the risk R_{k+1|k} of the ego's new state against B
-        ego_state = np.array((*self._ego_pose, v))
-        risk = float(self.estimator.risk(ego_state, belief, rng=self.np_random))
         self._last_risk = risk
         self._episode_risk += risk
         self._steps += 1
         # 4. reward terms, episode end, observation, info
         obs, info, goal = self._observe(risk, stepped=True)
-        reward = sum(info["rewards"].values())
+        reward = info["rewards"]["path_error"] + info["rewards"]["risk"]
         terminated = info["collision"] or goal
         truncated = self._steps >= s.max_steps
         if terminated or truncated:
@@ -420,23 +416,24 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     def _observe(self, risk: float, stepped: bool) -> tuple[np.ndarray, dict[str, Any], bool]:
         """Observation, info and whether the goal is reached; the reward terms are 0 at reset."""
         s = self.scenario
-        seen = observe(
-            s.path, s.ego.v_ref, s.collision_distance, self._ego_pose, self._ego_input, self._object
-        )
-        terms = reward_terms(seen.path_error, risk, self.reward_risk_weight)
-        rewards = {name: float(value) if stepped else 0.0 for name, value in terms.items()}
-        collision, goal = bool(seen.collision), bool(seen.goal)
+        pose, obj = self._ego_pose, self._object
+        seen = observe(s.path, s.ego.v_ref, s.collision_distance, pose, self._ego_input, obj, MATH)
+        if stepped:
+            rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
+        else:
+            rewards = {"path_error": 0.0, "risk": 0.0}
+        collision, goal = seen.collision, seen.goal
         info = {
             "risk": risk,
             "cost": risk,
             "episode_risk": self._episode_risk,
             "risk_violation": risk > s.risk_tolerance,
             "collision": collision,
-            "distance": float(seen.distance),
+            "distance": seen.distance,
             "path_error": seen.path_error,
-            "lambda": float(seen.lam),
-            "ego": np.array((*self._ego_pose, self._ego_input[0])),
-            "object": np.array(self._object[:4]),
+            "lambda": seen.lam,
+            "ego": np.array((pose[0], pose[1], pose[2], self._ego_input[0])),
+            "object": np.array(obj[:4]),
             "rewards": rewards,
             "is_success": goal and not collision,
         }

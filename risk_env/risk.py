@@ -34,6 +34,8 @@ from risk_env.scenario import Scenario
 from risk_env.severity import Severity, make_severity
 
 _BELIEF_FIELDS = tuple(f.name for f in dataclasses.fields(Belief))
+EgoFloats = tuple[float, float, float, float]
+"""One ego state ``(c1 [m], c2 [m], theta [rad], v [m/s])`` as Python floats."""
 ESTIMATOR_NAMES: tuple[str, ...] = ("exact", "monte_carlo", "worst_case", "grid")
 
 _NODE_X = np.tile(GAUSS_X, SEGMENTS)
@@ -55,6 +57,11 @@ def _shape(a: Any) -> tuple[int, ...]:
     if isinstance(a, float):
         return ()
     return a.shape if isinstance(a, np.ndarray) else np.shape(a)
+
+
+def _floor(a: Any) -> Any:
+    """``a`` raised to :data:`GEOMETRY_FLOOR`; Python floats stay floats."""
+    return max(a, GEOMETRY_FLOOR) if isinstance(a, (float, int)) else np.maximum(a, GEOMETRY_FLOOR)
 
 
 def disc_probability(
@@ -150,6 +157,12 @@ class RiskEstimator(ABC):
         """R for ``ego (..., 4)`` states: shape ``(...)`` broadcast with the belief's fields."""
         return np.asarray(self._risk(np.asarray(ego, dtype=float), belief, NUMPY))
 
+    def risk_one(self, ego: EgoFloats, belief: Belief, rng: np.random.Generator | None = None) -> float:
+        """R for one ego state ``(c1, c2, theta, v)`` of floats against a belief of floats, as a
+        float: :meth:`risk`'s value, without its array round trip where the estimator has a
+        scalar form (the single env's step)."""
+        return float(self.risk(np.array(ego, dtype=float), belief, rng=rng))
+
     def casadi_risk(self, ego: ca.SX, belief: Belief, **kwargs: Any) -> ca.SX:
         """The symbolic R for a CasADi ego vector of 4 and a belief of CasADi scalars."""
         return self._risk(ego, belief, CASADI, **kwargs)
@@ -162,9 +175,10 @@ class RiskEstimator(ABC):
         return f"{type(self).__name__}(severity={self.severity.name!r})"
 
 
-SCALAR_LOOP_MAX = 4
+SCALAR_LOOP_MAX = 8
 """Up to this many states near the box, :class:`ExactRisk` integrates them one by one with the
-scalar kernel rather than the batch kernel, whose fixed cost exceeds a few scalar calls."""
+scalar kernel (~20 us each) rather than the batch kernel, whose fixed cost (~150 us) exceeds a few
+scalar calls."""
 
 
 class ExactRisk(RiskEstimator):
@@ -184,28 +198,29 @@ class ExactRisk(RiskEstimator):
         ego = np.asarray(ego, dtype=float)
         fields = vars(belief)
         if ego.shape == (4,) and all(isinstance(fields[f], (float, int)) for f in _BELIEF_FIELDS):
-            return np.asarray(self._risk_one(ego, belief))
+            return np.asarray(self.risk_one(ego.tolist(), belief))
         x, y, th, v = _ego_parts(ego)
         dx, dy = x - belief.x, y - belief.y
-        sx, sy, hx, hy = (
-            np.maximum(fields[f], GEOMETRY_FLOOR) for f in ("sigma_x", "sigma_y", "half_x", "half_y")
-        )
+        sx, sy, hx, hy = (_floor(fields[f]) for f in ("sigma_x", "sigma_y", "half_x", "half_y"))
         near = signed_box_distance(dx, dy, hx, hy) < self.radius
         shapes = {near.shape, *(_shape(fields[f]) for f in _BELIEF_FIELDS)} - {()}
         shape = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
-        near = np.broadcast_to(near, shape).reshape(-1)
-        index = None if near.all() else np.flatnonzero(near)
+        if near.shape != shape:
+            near = np.broadcast_to(near, shape)
+        near = near.reshape(-1)
+        m = np.count_nonzero(near)
         out = np.zeros(shape)
-        m = out.size if index is None else len(index)
         if m == 0:
             return out
+        index = None if m == near.size else np.flatnonzero(near)
         if m <= SCALAR_LOOP_MAX:  # the batch kernel's fixed cost exceeds a few scalar calls
             flat = out.reshape(-1)
             states = np.broadcast_to(ego, shape + (4,)).reshape(-1, 4)
-            columns = {f: np.broadcast_to(fields[f], shape).reshape(-1) for f in _BELIEF_FIELDS}
+            scalars = {f: a for f, a in fields.items() if not _shape(a)}
+            arrays = {f: np.broadcast_to(a, shape).reshape(-1) for f, a in fields.items() if _shape(a)}
             for i in range(out.size) if index is None else index.tolist():
-                one = Belief(**{f: float(columns[f][i]) for f in _BELIEF_FIELDS})
-                flat[i] = self._risk_one(states[i], one)
+                one = Belief(**scalars, **{f: float(a[i]) for f, a in arrays.items()})
+                flat[i] = self.risk_one(states[i].tolist(), one)
             return out
 
         def pick(a: Any) -> Any:
@@ -213,7 +228,9 @@ class ExactRisk(RiskEstimator):
             a = np.asarray(a, dtype=float)
             if a.ndim == 0:
                 return a
-            a = np.broadcast_to(a, shape).reshape(-1)
+            if a.shape != shape:
+                a = np.broadcast_to(a, shape)
+            a = a.reshape(-1)
             return a if index is None else a[index]
 
         p = disc_probability_batch(
@@ -229,9 +246,10 @@ class ExactRisk(RiskEstimator):
         out.reshape(-1)[index] = p
         return out
 
-    def _risk_one(self, ego: np.ndarray, belief: Belief) -> float:
-        """R for one ego state ``(4,)`` against a belief of scalars, in Python floats."""
-        x, y, th, v = ego.tolist()
+    def risk_one(self, ego, belief, rng=None):
+        """As :meth:`RiskEstimator.risk_one`: the gate and E[s] on the MATH face, P by the scalar
+        kernel (exactly 0 without integrating when the disc misses the truncation box)."""
+        x, y, th, v = ego
         dx, dy = x - belief.x, y - belief.y
         hx = max(belief.half_x, GEOMETRY_FLOOR)
         hy = max(belief.half_y, GEOMETRY_FLOOR)
@@ -411,6 +429,10 @@ class WorstCaseRisk(RiskEstimator):
         hit = self.distance(ego, belief, ops) <= self.radius
         s = self.worst_severity(ego, belief, ops)
         return ops.where(hit, s, 0.0 * s)
+
+    def risk_one(self, ego, belief, rng=None):
+        """As :meth:`RiskEstimator.risk_one`: the same formulas on the MATH face."""
+        return float(self._risk(ego, belief, MATH))
 
     def casadi_margin(self, ego, belief, epsilon, **kwargs):
         """``max(distance - r [m], (epsilon - s_worst) / scale) >= 0``: keep the ego disc off
