@@ -51,7 +51,7 @@ def test_readme_starts_with_the_two_commands_each_in_its_own_block():
     assert main_job.endswith("python -m benchmarks.table2")
     assert tests.endswith("python -m pytest -q")
     for command in (main_job, tests):
-        assert command.startswith("pip install torch ") and "download.pytorch.org/whl/cpu" in command
+        assert command.startswith('pip install "torch==') and "download.pytorch.org/whl/cpu" in command
     assert 'pip install -e ".[rl]"' in main_job and 'pip install -e ".[dev]"' in tests
     # nothing but the title and the pitch before them
     assert README.index("```") > README.index("## Install and run")
