@@ -37,6 +37,8 @@ ESTIMATOR_NAMES: tuple[str, ...] = ("exact", "monte_carlo", "worst_case", "grid"
 
 _NODE_X = np.tile(GAUSS_X, SEGMENTS)
 _NODE_W = np.tile(GAUSS_W, SEGMENTS)
+_SQRT2 = math.sqrt(2.0)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 MIN_WIDTH = 1e-3
 """Smallest width [m] of the Monte Carlo estimator's smoothed indicator (draws of a point mass)."""
 
@@ -68,6 +70,18 @@ def disc_probability(
     offset, so near the object the disc boundary runs along it and the sharp crossing of the
     boundary falls to the closed form. The outer integral is split where the box edges cut the
     disc and at fixed multiples of the outer standard deviation.
+
+    Derivatives (the CasADi face) are those of the integral, not of where the rule puts its
+    nodes: the segment edges are held constant (:meth:`~risk_env.ops.Ops.stop_derivative`),
+    which is exact for the integral because the integrand is continuous across every interior
+    edge (Leibniz's rule: the terms of a moving edge cancel between its two segments), and the
+    motion of the outer range's two ends, where the integrand jumps to 0, enters through two
+    extra nodes at the held ends whose weights are the ends' motion: 0 in value, Leibniz's term
+    to second order in derivatives. Each node's term is then a product of a function of dx and
+    a function of dy, whose derivatives are cheap: the Hessian costs a third of differentiating
+    through the edges (asin, acos, the sorting network), the gradient 60 %, and both are the
+    quadrature of the exact derivatives (``tests/test_risk.py`` holds them to finite
+    differences of an independent quadrature).
     """
     r = radius
     sx = ops.maximum(belief.sigma_x, GEOMETRY_FLOOR)
@@ -75,7 +89,7 @@ def disc_probability(
     hx = ops.maximum(belief.half_x, GEOMETRY_FLOOR)
     hy = ops.maximum(belief.half_y, GEOMETRY_FLOOR)
     swap = ops.abs(dx) > ops.abs(dy)
-    dx, dy = ops.where(swap, dy, dx), ops.where(swap, dx, dy)
+    dx, dy = ops.select(swap, dy, dx), ops.select(swap, dx, dy)  # one derivative path each
     sx, sy = ops.where(swap, sy, sx), ops.where(swap, sx, sy)
     hx, hy = ops.where(swap, hy, hx), ops.where(swap, hx, hy)
     ex = ops.expand
@@ -89,23 +103,34 @@ def disc_probability(
     # ... and where the chord's ends cross the inner box edges: r cos t = |hy -+ dy|.
     a = ops.acos(ops.clip(ops.stack([ops.abs(hy - dy), ops.abs(hy + dy)]) / r, 0.0, EDGE))
     inner = ops.sort(ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi))
-    edges = ops.stack_vectors([t_lo, inner, t_hi])
+    edges = ops.stop_derivative(ops.stack_vectors([t_lo, inner, t_hi]))
     lo, hi = ops.part(edges, slice(0, -1)), ops.part(edges, slice(1, None))
     k = len(GAUSS_X)
     half = ops.repeat(0.5 * (hi - lo), k)
     t = ops.repeat(0.5 * (hi + lo), k) + half * ops.const(_NODE_X)
     w = half * ops.const(_NODE_W)
+    # The range's ends move (held edges do not): a node at each held end, halfway along its
+    # motion, weighted by that motion (-lo, +hi), adds 0 in value and Leibniz's term in derivatives.
+    held_lo, held_hi = ops.part(edges, slice(0, 1)), ops.part(edges, slice(-1, None))
+    move_lo, move_hi = t_lo - held_lo, t_hi - held_hi
+    t = ops.stack_vectors([t, held_lo + 0.5 * move_lo, held_hi + 0.5 * move_hi])
+    w = ops.stack_vectors([w, -move_lo, move_hi])
 
     half_chord = r * ops.cos(t)
     x = ex(dx) + r * ops.sin(t)
-    y_hi = ops.minimum(ex(hy), ex(dy) + half_chord)
-    y_lo = ops.maximum(-ex(hy), ex(dy) - half_chord)
-    zx = ops.erf(hx / (sx * math.sqrt(2.0)))
-    zy = ops.erf(hy / (sy * math.sqrt(2.0)))
-    # Complementary form: the exact mass of the outer range times the full inner mass, minus
-    # what the chord misses; exact wherever the chord spans the inner box.
-    strip = ops.maximum(ops.norm_cdf(y_hi / ex(sy)) - ops.norm_cdf(y_lo / ex(sy)), 0.0)
-    missed = ops.sum(w * half_chord * ops.norm_pdf(x / ex(sx)) * (ex(zy) - strip)) / sx
+    top, bottom = ex(dy) + half_chord, ex(dy) - half_chord
+    ky = 1.0 / (_SQRT2 * sy)
+    zx = ops.erf(hx / (_SQRT2 * sx))
+    zy = ops.erf(hy * ky)
+    # Complementary form: the exact mass of the outer range times the full inner mass, minus what
+    # the chord misses; exact wherever the chord spans the inner box. Twice the missed inner mass:
+    # above the chord 2 (Phi(hy) - Phi(top)), below it 2 (Phi(bottom) - Phi(-hy)), at most 2 zy
+    # (a chord that misses the box).
+    above = ops.maximum(ex(zy) - ops.erf(top * ex(ky)), 0.0)
+    below = ops.maximum(ex(zy) + ops.erf(bottom * ex(ky)), 0.0)
+    missed_twice = ops.minimum(above + below, 2.0 * ex(zy))
+    u = x * ex(1.0 / (_SQRT2 * sx))
+    missed = ops.sum(w * half_chord * ops.exp(-u * u) * missed_twice) * (0.5 * _INV_SQRT_2PI) / sx
     s_lo, s_hi = ops.sin(ops.part(t_lo, 0)), ops.sin(ops.part(t_hi, 0))
     x_lo, x_hi = dx + r * s_lo, dx + r * s_hi
     mass = ops.norm_cdf(x_hi / sx) - ops.norm_cdf(x_lo / sx)
