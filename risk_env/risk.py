@@ -78,10 +78,17 @@ def disc_probability(
     motion of the outer range's two ends, where the integrand jumps to 0, enters through two
     extra nodes at the held ends whose weights are the ends' motion: 0 in value, Leibniz's term
     to second order in derivatives. Each node's term is then a product of a function of dx and
-    a function of dy, whose derivatives are cheap: the Hessian costs a third of differentiating
-    through the edges (asin, acos, the sorting network), the gradient 60 %, and both are the
-    quadrature of the exact derivatives (``tests/test_risk.py`` holds them to finite
-    differences of an independent quadrature).
+    one of dy, cheap to differentiate: the solver's Hessian takes 54 % fewer instructions than
+    through the edges (asin, acos, the sorting network), its Jacobian 46 % fewer. The gradient
+    is the quadrature of P's gradient: it differs from the derivative of the rule's value by
+    the rule's sensitivity to where its edges lie (median 1e-8 on random geometries), so a
+    converged plan meets the constraint's value exactly and is stationary to that accuracy.
+    The Hessian is the quadrature of P's Hessian less one rank-one term per kink where a
+    chord's end crosses the box's inner edge inside the range (the kink's motion: its slope
+    jump times the outer product of its angle's gradient), which only shapes the solver's
+    steps: with that term (8 more nodes, 20 % more instructions) the 18 closed loops of
+    ``benchmarks.timing`` took the same iterations. ``tests/test_risk.py`` holds both against
+    finite differences of an adaptive quadrature.
     """
     r = radius
     sx = ops.maximum(belief.sigma_x, GEOMETRY_FLOOR)

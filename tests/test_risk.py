@@ -6,7 +6,7 @@ import pytest
 from scipy import integrate, stats
 
 from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
-from risk_env.ops import NUMPY
+from risk_env.ops import CASADI, NUMPY
 from risk_env.risk import WorstCaseRisk, disc_probability, signed_box_distance
 
 MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
@@ -324,3 +324,60 @@ def test_exact_risk_skips_only_states_whose_disc_misses_the_box():
     scale = np.asarray(est.severity.expected(steps[:, 3], steps[:, 2], beliefs, NUMPY))
     assert np.all(np.abs(est.risk(steps, beliefs) - full_steps) <= 1e-12 * scale)
     assert float(est.risk(np.array([60.0, 60.0, 0.0, 4.0]), beliefs[1])) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("case", "kink"),
+    [
+        ((0.3, 0.2, 0.1, 0.1, 1.0, 1.0), False),  # low preset, n = 1, object inside the disc
+        ((2.9, 0.4, 0.3, 0.3, 3.0, 3.0), False),  # low, n = 3: the disc edge through the object
+        ((2.0, -2.9, 0.8, 0.8, 2.0, 2.0), False),  # medium, truncation active
+        ((4.0, -0.2, 0.42, 0.45, 4.2, 4.5), False),
+        ((-1.2, 3.3, 1.5, 1.7, 3.0, 3.4), False),  # anisotropic, the box cuts the disc
+        ((-4.0, 3.9, 1.5, 1.5, 3.0, 3.0), True),  # high, n = 1: the disc over the box's corner
+        ((9.0, 6.0, 4.5, 4.5, 9.0, 9.0), True),  # high, the disc on the box's corner
+    ],
+)
+def test_disc_probability_derivatives_are_the_integrals(case, kink):
+    """The CasADi face's derivatives (edges held, Leibniz nodes at the range's ends) against
+    finite differences of the adaptive quadrature. The gradient is P's. So is the Hessian, but
+    for the motion of the kinks where a chord's end crosses the box's inner edge (``kink``):
+    a rank-one term per kink, left out (it changes the solver's steps, not its solution)."""
+    dx, dy, sx, sy, hx, hy = case
+    d = ca.SX.sym("d", 2)
+    b = Belief(0.0, 0.0, 0.0, 3.0, sx, sy, 1.0, hx, hy, -5.0, 5.0)
+    p = disc_probability(d[0], d[1], 3.0, b, CASADI)
+    hessian, gradient = ca.hessian(p, d)
+    value, grad, hess = (np.asarray(a) for a in ca.Function("f", [d], [p, gradient, hessian])([dx, dy]))
+    at, e = np.array([dx, dy]), np.eye(2)
+
+    def ref(x: np.ndarray) -> float:
+        return reference_probability(x[0], x[1], 3.0, sx, sy, hx, hy)
+
+    h = 1e-4
+    fd_grad = np.array([(ref(at + h * e[i]) - ref(at - h * e[i])) / (2 * h) for i in range(2)])
+    h = 2e-3
+    fd_hess = np.array(
+        [
+            [
+                (
+                    ref(at + h * (e[i] + e[j]))
+                    - ref(at + h * (e[i] - e[j]))
+                    - ref(at - h * (e[i] - e[j]))
+                    + ref(at - h * (e[i] + e[j]))
+                )
+                / (4 * h * h)
+                for j in range(2)
+            ]
+            for i in range(2)
+        ]
+    )
+    assert value.item() == pytest.approx(ref(at), abs=5e-5)
+    scale = max(np.max(np.abs(fd_grad)), 1e-3)
+    np.testing.assert_allclose(grad.ravel(), fd_grad, atol=2e-3 * scale + 1e-6)
+    scale = max(np.max(np.abs(fd_hess)), 1e-3)
+    missing = hess - fd_hess
+    if not kink:
+        np.testing.assert_allclose(hess, fd_hess, atol=1e-2 * scale)
+    else:  # what is left out has rank one
+        assert abs(np.linalg.det(missing)) <= 1e-2 * np.sum(missing**2) + (1e-2 * scale) ** 2
