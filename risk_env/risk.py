@@ -80,9 +80,11 @@ def disc_probability(
     to second order in derivatives. Each node's term is then a product of a function of dx and
     one of dy, cheap to differentiate: the solver's Hessian takes 54 % fewer instructions than
     through the edges (asin, acos, the sorting network), its Jacobian 46 % fewer. The gradient
-    is the quadrature of P's gradient: it differs from the derivative of the rule's value by
-    the rule's sensitivity to where its edges lie (median 1e-8 on random geometries), so a
-    converged plan meets the constraint's value exactly and is stationary to that accuracy.
+    is the quadrature of P's gradient, which differs from the derivative of the rule's value by
+    the rule's sensitivity to where its edges lie: on the plans of six closed loops (the risky
+    steps, 264 of them) by 2e-5 of the gradient in the median and 1.2 % at most, and it is the
+    closer of the two to P's own gradient (median 8e-6 against 2.5e-5). A converged plan meets
+    the constraint's value exactly and is stationary to that accuracy.
     The Hessian is the quadrature of P's Hessian less one rank-one term per kink where a
     chord's end crosses the box's inner edge inside the range (the kink's motion: its slope
     jump times the outer product of its angle's gradient), which only shapes the solver's

@@ -381,3 +381,17 @@ def test_disc_probability_derivatives_are_the_integrals(case, kink):
         np.testing.assert_allclose(hess, fd_hess, atol=1e-2 * scale)
     else:  # what is left out has rank one
         assert abs(np.linalg.det(missing)) <= 1e-2 * np.sum(missing**2) + (1e-2 * scale) ** 2
+
+
+def test_stop_derivative_holds_the_value_and_drops_the_derivative():
+    x = ca.SX.sym("x")
+    held = CASADI.stop_derivative(ca.sin(x))
+    picked = CASADI.select(x > 0, x * x, 3 * x)
+    f = ca.Function("f", [x], [held, ca.jacobian(held, x), picked, ca.jacobian(picked, x)])
+    for value in (-1.3, -1e-9, 0.0, 0.7, 1.5707963267948966):
+        h, dh, p, dp = (float(a) for a in f(value))
+        assert abs(h - np.sin(value)) <= 2.0**-51 and dh == 0.0
+        assert p == (value * value if value > 0 else 3 * value)
+        assert dp == (2 * value if value > 0 else 3.0)
+    assert NUMPY.stop_derivative(0.3) == 0.3
+    assert NUMPY.select(np.array([True, False]), 1.0, 2.0).tolist() == [1.0, 2.0]
