@@ -27,7 +27,17 @@ import numpy as np
 from risk_env.exact_kernel import disc_probability_batch, disc_probability_scalar
 from risk_env.ops import CASADI, MATH, NUMPY, Ops
 from risk_env.prediction import Belief
-from risk_env.quadrature import EDGE, GAUSS_W, GAUSS_X, GEOMETRY_FLOOR, SEGMENTS, SIGMA_BREAKS, SUPPORT
+from risk_env.quadrature import (
+    EDGE,
+    GAUSS_W,
+    GAUSS_X,
+    GEOMETRY_FLOOR,
+    SIGMA_BREAKS,
+    SOLVER_SHORTFALL,
+    SOLVER_SIGMA_BREAKS,
+    SOLVER_SUPPORT,
+    SUPPORT,
+)
 from risk_env.quadrature import GAUSS_NODES as GAUSS_NODES
 from risk_env.scenario import Scenario
 from risk_env.severity import Severity, make_severity
@@ -35,8 +45,6 @@ from risk_env.severity import Severity, make_severity
 _BELIEF_FIELDS = tuple(f.name for f in dataclasses.fields(Belief))
 ESTIMATOR_NAMES: tuple[str, ...] = ("exact", "monte_carlo", "worst_case", "grid")
 
-_NODE_X = np.tile(GAUSS_X, SEGMENTS)
-_NODE_W = np.tile(GAUSS_W, SEGMENTS)
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 MIN_WIDTH = 1e-3
@@ -59,10 +67,18 @@ def _shape(a: Any) -> tuple[int, ...]:
 
 
 def disc_probability(
-    dx: Any, dy: Any, radius: float, belief: Belief, ops: Ops = NUMPY, gate: bool = True
+    dx: Any,
+    dy: Any,
+    radius: float,
+    belief: Belief,
+    ops: Ops = NUMPY,
+    gate: bool = True,
+    sigma_breaks: tuple[float, ...] = SIGMA_BREAKS,
+    support: float = SUPPORT,
 ) -> Any:
     """P(||d - z|| <= radius) for z ~ truncated N(0, diag(sigma_x^2, sigma_y^2)) on the box
     ``[-half_x, half_x] x [-half_y, half_y]``; ``(dx, dy)`` = ego centre minus object mean [m].
+    ``sigma_breaks`` and ``support``: the rule (:mod:`risk_env.quadrature`; default the env's).
 
     One axis (the inner) is integrated in closed form with Phi, the other (the outer) by
     Gauss-Legendre quadrature in the disc angle t (x = dx + r sin t, which removes the
@@ -78,8 +94,9 @@ def disc_probability(
     motion of the outer range's two ends, where the integrand jumps to 0, enters through two
     extra nodes at the held ends whose weights are the ends' motion: 0 in value, Leibniz's term
     to second order in derivatives. Each node's term is then a product of a function of dx and
-    one of dy, cheap to differentiate: the solver's Hessian takes 54 % fewer instructions than
-    through the edges (asin, acos, the sorting network), its Jacobian 46 % fewer. The gradient
+    one of dy, cheap to differentiate: the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
+    instructions than through the edges (asin, acos, the sorting network), its Jacobian 46 %
+    fewer (with the same rule; the SMPC's shorter rule saves 14 % more). The gradient
     is the quadrature of P's gradient, which differs from the derivative of the rule's value by
     the rule's sensitivity to where its edges lie: on the plans of six closed loops (the risky
     steps, 264 of them) by 2e-5 of the gradient in the median and 1.2 % at most, and it is the
@@ -104,8 +121,8 @@ def disc_probability(
     ex = ops.expand
 
     # Angles where the outer coordinate meets a box edge or a multiple of its sigma ...
-    at_x = ops.stack([-hx, hx, *(k * sx for k in SIGMA_BREAKS)])
-    at_x = ops.clip(at_x, -SUPPORT * ex(sx), SUPPORT * ex(sx))
+    at_x = ops.stack([-hx, hx, *(k * sx for k in sigma_breaks)])
+    at_x = ops.clip(at_x, -support * ex(sx), support * ex(sx))
     t_x = ops.asin(ops.clip((at_x - ex(dx)) / r, -EDGE, EDGE))
     t_lo = ops.part(t_x, slice(0, 1))
     t_hi = ops.maximum(ops.part(t_x, slice(1, 2)), t_lo)
@@ -114,10 +131,10 @@ def disc_probability(
     inner = ops.sort(ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi))
     edges = ops.stop_derivative(ops.stack_vectors([t_lo, inner, t_hi]))
     lo, hi = ops.part(edges, slice(0, -1)), ops.part(edges, slice(1, None))
-    k = len(GAUSS_X)
+    k, segments = len(GAUSS_X), len(sigma_breaks) + 5
     half = ops.repeat(0.5 * (hi - lo), k)
-    t = ops.repeat(0.5 * (hi + lo), k) + half * ops.const(_NODE_X)
-    w = half * ops.const(_NODE_W)
+    t = ops.repeat(0.5 * (hi + lo), k) + half * ops.const(np.tile(GAUSS_X, segments))
+    w = half * ops.const(np.tile(GAUSS_W, segments))
     # The range's ends move (held edges do not): a node at each held end, halfway along its
     # motion, weighted by that motion (-lo, +hi), adds 0 in value and Leibniz's term in derivatives.
     held_lo, held_hi = ops.part(edges, slice(0, 1)), ops.part(edges, slice(-1, None))
@@ -201,7 +218,15 @@ scalar kernel rather than the batch kernel, whose fixed cost exceeds a few scala
 
 
 class ExactRisk(RiskEstimator):
-    """R = P(disc) E[s]: deterministic and smooth in the ego state."""
+    """R = P(disc) E[s]: deterministic and smooth in the ego state.
+
+    :meth:`casadi_margin`, what the SMPC constrains, integrates P with the solver's rule: the
+    env's cut at +-5 sigma of the outer axis (:data:`~risk_env.quadrature.SOLVER_SUPPORT`; 40
+    nodes, not 48, the others the same), whose P falls below the env's by at most
+    :data:`~risk_env.quadrature.SOLVER_SHORTFALL` (5.7e-7), which it adds back wherever the disc
+    meets the box: never below the env's R, above it by at most 5.7e-7 E[s] (0.02 J for the
+    paper's severities). :meth:`casadi_risk` is the env's R itself.
+    """
 
     name = "exact"
 
@@ -209,6 +234,22 @@ class ExactRisk(RiskEstimator):
         x, y, th, v = _ego_parts(ego)
         p = disc_probability(x - belief.x, y - belief.y, self.radius, belief, ops, gate)
         return p * self.severity.expected(v, th, belief, ops)
+
+    def solver_risk(self, ego: ca.SX, belief: Belief) -> ca.SX:
+        """The symbolic R the SMPC constrains: P by the solver's rule plus its shortfall (where
+        the disc meets the box), times E[s]; at or above the env's R."""
+        x, y, th, v = _ego_parts(ego)
+        dx, dy = x - belief.x, y - belief.y
+        p = disc_probability(dx, dy, self.radius, belief, CASADI, False, SOLVER_SIGMA_BREAKS, SOLVER_SUPPORT)
+        hx = ca.fmax(belief.half_x, GEOMETRY_FLOOR)
+        hy = ca.fmax(belief.half_y, GEOMETRY_FLOOR)
+        near = signed_box_distance(dx, dy, hx, hy, CASADI) < self.radius
+        p = near * ca.fmin(p + SOLVER_SHORTFALL, 1.0)
+        return p * self.severity.expected(v, th, belief, CASADI)
+
+    def casadi_margin(self, ego, belief, epsilon, **kwargs):
+        """``(epsilon - R) / scale`` with the solver's R (:meth:`solver_risk`): conservative."""
+        return (epsilon - self.solver_risk(ego, belief)) / self.severity.scale
 
     def risk(self, ego, belief, rng=None):
         """As :meth:`RiskEstimator.risk`; states whose disc misses the truncation box get exactly

@@ -7,6 +7,7 @@ from scipy import integrate, stats
 
 from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
 from risk_env.ops import CASADI, NUMPY
+from risk_env.quadrature import SOLVER_SHORTFALL, SOLVER_SIGMA_BREAKS, SOLVER_SUPPORT
 from risk_env.risk import WorstCaseRisk, disc_probability, signed_box_distance
 
 MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
@@ -395,3 +396,44 @@ def test_stop_derivative_holds_the_value_and_drops_the_derivative():
         assert dp == (2 * value if value > 0 else 3.0)
     assert NUMPY.stop_derivative(0.3) == 0.3
     assert NUMPY.select(np.array([True, False]), 1.0, 2.0).tolist() == [1.0, 2.0]
+
+
+def test_solver_rule_falls_short_of_the_envs_by_at_most_its_bound():
+    """The MPC's rule (cut at +-5 sigma) against the env's (+-7): not above it (to 1e-9), below it
+    by at most SOLVER_SHORTFALL, on random geometries (boxes from 0.05 to 12 sigma, so the cut binds on
+    many) and along the paper's predictions; the margin it adds back makes ExactRisk's solver R
+    at or above the env's R."""
+    rng = np.random.default_rng(17)
+    n = 20000
+    s = np.exp(rng.uniform(np.log(0.02), np.log(6.0), (n, 2)))
+    s[::3, 1] = s[::3, 0]
+    h = s * np.exp(rng.uniform(np.log(0.05), np.log(12.0), (n, 2)))
+    d = rng.uniform(-1, 1, (n, 2)) * (h + 3.0)
+    b = Belief(0.0, 0.0, 0.0, 3.0, s[:, 0], s[:, 1], 1.0, h[:, 0], h[:, 1], -5.0, 5.0)
+    env_rule = disc_probability(d[:, 0], d[:, 1], 3.0, b)
+    solver_rule = disc_probability(
+        d[:, 0], d[:, 1], 3.0, b, sigma_breaks=SOLVER_SIGMA_BREAKS, support=SOLVER_SUPPORT
+    )
+    shortfall = env_rule - solver_rule
+    # (-1e-9: the env rule's own quadrature error on its tail segments, where P is ~1e-10)
+    assert np.all(shortfall >= -1e-9) and np.all(shortfall <= SOLVER_SHORTFALL + 1e-12)
+    assert np.max(shortfall) > 0.1 * SOLVER_SHORTFALL  # the cut bound somewhere
+    for preset in ("low", "medium", "high"):
+        sc = Scenario.preset(preset)
+        est = make_estimator("exact", sc)
+        e, p = ca.SX.sym("e", 4), ca.SX.sym("p", Belief.SIZE)
+        f = ca.Function("f", [e, p], [est.solver_risk(e, Belief.from_array(p))])
+        egos = np.column_stack(
+            [rng.normal(5, 6, 400), rng.normal(-2, 6, 400), rng.uniform(-3, 3, 400), rng.uniform(-4, 8, 400)]
+        )
+        for belief_n in predict_array(sc, MEASUREMENT)[1:]:
+            params = np.tile(belief_n.as_array()[:, None], (1, len(egos)))
+            solver = np.array(f.map(len(egos))(egos.T, params)).ravel()
+            env = est.risk(egos, belief_n)
+            scale = np.asarray(est.severity.expected(egos[:, 3], egos[:, 2], belief_n, NUMPY))
+            assert np.all(solver >= env - 1e-9)
+            assert np.all(solver <= env + (SOLVER_SHORTFALL + 1e-9) * scale)
+            off = signed_box_distance(
+                egos[:, 0] - belief_n.x, egos[:, 1] - belief_n.y, belief_n.half_x, belief_n.half_y
+            )
+            assert np.all(solver[off >= 3.0] == 0.0) and np.any(off >= 3.0)  # off the box: exactly 0
