@@ -25,6 +25,8 @@ from scipy import special
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_HOLD = 2.0**50
+"""Grid of :meth:`Ops.stop_derivative` (CasADi): |a| * 2**50 < 2**52 keeps the rounding exact."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,22 @@ class Ops:
     def wrap_angle(self, a: Any) -> Any:
         """a wrapped to [-pi, pi)."""
         return a - 2.0 * math.pi * self.floor((a + math.pi) / (2.0 * math.pi))
+
+    def select(self, c: Any, a: Any, b: Any) -> Any:
+        """``a`` where ``c`` else ``b``, for finite ``a`` and ``b``. CasADi writes it as the sum
+        ``c a + (1 - c) b`` (a comparison has no derivative), so derivatives follow one
+        expression rather than both branches of a conditional; numpy and math use ``where``."""
+        if self.name == "casadi":
+            return c * a + (1 - c) * b
+        return self.where(c, a, b)
+
+    def stop_derivative(self, a: Any) -> Any:
+        """``a`` held constant under differentiation, for ``|a| < 4``. CasADi rounds it to a
+        multiple of 2**-50 (``floor`` has a zero derivative): within 4.5e-16 of ``a``, and no
+        derivative flows back into ``a``. numpy and math have no derivatives: ``a`` itself."""
+        if self.name == "casadi":
+            return ca.floor(a * _HOLD + 0.5) / _HOLD
+        return a
 
 
 def _np_where(c: Any, a: Any, b: Any) -> Any:
