@@ -13,6 +13,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from risk_env import checks
+
 FALLBACK_KINDS: tuple[str, ...] = ("soft", "manoeuvre")
 """The MPC's fallback levels, in order, when the hard problem gives no plan: ``"soft"`` (the plan of
 the same problem with its risk rows softened by L1-penalised slacks) and ``"manoeuvre"`` (the safest
@@ -106,12 +108,19 @@ class SolveReport:
 
 
 def as_batch(observation: Any, size: int) -> tuple[np.ndarray, bool]:
-    """``(B, size)`` float64 observations and whether the input was a single ``(size,)`` one."""
-    obs = np.asarray(observation, dtype=float)
+    """``(B, size)`` float64 observations (B >= 1) and whether the input was a single ``(size,)``
+    one; raises ``ValueError`` naming the value for anything else (an empty batch, bools,
+    strings, complex numbers, a wrong shape)."""
+    expected = f"an observation ({size},) or a batch (B, {size}) of real numbers"
+    obs = checks.real_array(observation, "observation", expected)
     if obs.ndim == 1:
         if obs.shape != (size,):
             raise ValueError(f"observation must have shape ({size},) or (B, {size}), got {obs.shape}")
         return obs[None, :], True
     if obs.ndim != 2 or obs.shape[1] != size:
         raise ValueError(f"observation must have shape ({size},) or (B, {size}), got {obs.shape}")
+    if obs.shape[0] == 0:
+        raise ValueError(
+            f"observation is an empty batch, shape {obs.shape}; pass at least one observation ({size},)"
+        )
     return obs, False

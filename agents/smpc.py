@@ -33,20 +33,24 @@ class SMPC(PathFollowingMPC):
     re-evaluates the plan with the hard indicator on the same draws.
 
     The exact risk's constraint is written ``max(clearance, (epsilon - R)/scale) >= backoff``, and
-    ``clearance >= backoff`` alone at epsilon = 0 (the core's ``"zero"`` variant). The clearance is
-    the distance from the ego centre to where the object may be, minus ``r_e + r_o``: to the
-    truncation box for the exact risk; to the draws for Monte Carlo, as a smooth soft minimum of
-    the distances, below the nearest by at most :data:`CLEARANCE_SOFTNESS` ``* log(J)`` (0.31 m for
-    J = 500). R vanishes wherever the clearance is positive, so this is R <= epsilon; but R's
+    ``clearance >= backoff`` alone at epsilon = 0 (the core's ``"zero"`` variant). R there is
+    :meth:`~risk_env.risk.ExactRisk.solver_risk`: the env's quadrature cut at +-5 sigma (40 nodes,
+    not 48) with its bounded shortfall added back, never below the env's R and above it by at most
+    5.7e-7 E[s]; its derivatives are those of the integral (see
+    :func:`~risk_env.risk.disc_probability`), a third of the cost of differentiating the rule. The
+    clearance is the distance from the ego centre to where the object may be, minus ``r_e + r_o``:
+    to the truncation box for the exact risk; to the draws for Monte Carlo, as a smooth soft minimum
+    of the distances, below the nearest by at most :data:`CLEARANCE_SOFTNESS` ``* log(J)`` (0.31 m
+    for J = 500). R vanishes wherever the clearance is positive, so this is R <= epsilon; but R's
     gradient vanishes with R, and R <= 0 has no interior, which stalls an interior-point solver,
     while the clearance keeps a gradient (and a truncated Gaussian puts ~1e-20 of mass near a box
-    edge ten sigmas out: the unguarded exact constraint would let the plan into the box at
-    epsilon = 0). So at epsilon = 0 the exact SMPC is the RMPC's box constraint, as it must be
-    (P = 0 off the box), and the Monte Carlo SMPC keeps off every draw (it differs from the RMPC by
-    the tails its draws miss). The Monte Carlo SMPC at epsilon > 0 asks ``(epsilon - R)/scale >=
-    backoff`` alone: its smoothed R is never exactly 0, so the constraint has an interior, and the
-    clearance could only matter for tolerances below the logistic's tails (a few J); it doubled
-    the cost of an evaluation.
+    edge ten sigmas out: the unguarded exact constraint would let the plan into the box at epsilon =
+    0). So at epsilon = 0 the exact SMPC is the RMPC's box constraint, as it must be (P = 0 off the
+    box), and the Monte Carlo SMPC keeps off every draw (it differs from the RMPC by the tails its
+    draws miss). The Monte Carlo SMPC at epsilon > 0 asks ``(epsilon - R)/scale >= backoff`` alone:
+    its smoothed R is never exactly 0, so the constraint has an interior, and the clearance could
+    only matter for tolerances below the logistic's tails (a few J); it doubled the cost of an
+    evaluation.
 
     Monte Carlo in the solver: with a fixed 0.05 m logistic the risk was a staircase of single
     draws where they are sparse (500 draws with sigma = 6 m lie ~0.1 m apart near the disc edge),

@@ -1,7 +1,7 @@
 """Our agents in highway-env: RMPC and SMPC drive ``intersection-v1`` against highway-env's own IDM.
 
-    python -m benchmarks.highway_intersection --episodes 50 --out docs/results/highway
-    python -m benchmarks.highway_intersection --episodes 2 --agents rmpc,idm --out /tmp/hw
+    python -m benchmarks.highway_intersection --episodes 2 --agents rmpc,idm     # a quick look
+    python -m benchmarks.highway_intersection --agents rmpc,smpc,idm,rmpc:3 --out docs/results/highway
 
 Each agent drives the controlled vehicle of ``intersection-v1`` (:data:`INTERSECTION_CONFIG`: the
 kinematic vehicle with continuous actions, T = 0.5 s, highway-env's traffic, the left turn to
@@ -35,7 +35,10 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from benchmarks import cli
 from benchmarks.sampled import wilson
+from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
+from risk_env.severity import check_tolerance
 
 AGENTS = ("rmpc", "smpc", "idm")
 LABELS = {"rmpc": "RMPC (worst case)", "smpc": "SMPC (exact)", "idm": "highway-env IDM"}
@@ -190,19 +193,36 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
     return "\n".join(lines) + "\n"
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.highway_intersection``."""
+    parser = cli.parser("highway_intersection", __doc__)
     parser.add_argument("--episodes", type=int, default=50, help="seeded episodes per agent")
     parser.add_argument("--seed", type=int, default=0, help="first seed")
     parser.add_argument(
         "--agents",
         default=",".join(AGENTS),
-        help=f"comma-separated, of {AGENTS}; 'rmpc:3' plans against the 3 most conflicting vehicles",
+        help=f"comma list of {', '.join(AGENTS)}; NAME:K (e.g. rmpc:3) plans against the K most"
+        " conflicting vehicles",
     )
-    parser.add_argument("--uncertainty", default="low", help="low, medium or high (per 0.5 s step)")
-    parser.add_argument("--severity", default="paper", help="paper, plastic or probability")
+    parser.add_argument(
+        "--uncertainty",
+        choices=UNCERTAINTY_PRESETS,
+        default="low",
+        help="Table I level (per 0.5 s step)",
+    )
+    parser.add_argument("--severity", choices=SEVERITY_NAMES, default="paper", help="severity model")
     parser.add_argument("--tolerance", type=float, default=500.0, help="epsilon [units of the severity]")
-    parser.add_argument("--out", type=Path, default=Path("results/highway"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results/highway"),
+        help="output folder for intersection.md and the CSVs; the committed ones are in docs/results/highway",
+    )
+    return parser
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = build_parser()
     args = parser.parse_args(argv)
     args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
     unknown = [
@@ -216,6 +236,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"unknown agent(s) {unknown}; expected some of {AGENTS}")
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
+    try:
+        check_tolerance(args.tolerance, args.severity, "--tolerance")
+    except ValueError as error:
+        parser.error(str(error))
     return args
 
 

@@ -1,7 +1,7 @@
 """Pictures through highway-env's graphics: the paper's episode as a GIF, an intersection frame.
 
-    python -m benchmarks.highway_render --out docs/results/highway
-    python -m benchmarks.highway_render --out docs/results/highway --intersection --intersection-seed 0
+    python -m benchmarks.highway_render                   # the paper's episode, to results/highway
+    python -m benchmarks.highway_render --out docs/results/highway --estimator monte_carlo --intersection
 
 1. The paper's episode: ``RiskCrossing-v0`` with ``renderer="highway"``, driven by an agent
    (``--agent rmpc``: :class:`agents.RMPC`, or ``smpc``) in the shared rollout loop
@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+from benchmarks import cli  # noqa: E402
 
 
 class FrameRecorder:
@@ -151,21 +153,38 @@ def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], in
     return frames, int(np.argmin(gaps)), summary
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("results/highway"))
-    parser.add_argument("--agent", choices=("rmpc", "smpc"), default="rmpc")
-    parser.add_argument("--uncertainty", default="low")
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.highway_render``."""
+    parser = cli.parser("highway_render", __doc__)
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results/highway"),
+        help="output folder for the GIFs and the PNG; the committed ones are in docs/results/highway",
+    )
+    parser.add_argument("--agent", choices=("rmpc", "smpc"), default="rmpc", help="who drives")
+    parser.add_argument(
+        "--uncertainty", choices=("low", "medium", "high"), default="low", help="Table I level"
+    )
     parser.add_argument("--tolerance", type=float, default=0.0, help="epsilon [J]")
     parser.add_argument(
-        "--estimator", default="exact", help="the env's risk estimator (monte_carlo: draws shown)"
+        "--estimator",
+        choices=("exact", "monte_carlo", "worst_case", "grid"),
+        default="exact",
+        help="the env's risk estimator (monte_carlo also draws its samples)",
     )
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--fps", type=float, default=4.0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the paper's episode")
+    parser.add_argument("--fps", type=float, default=4.0, help="frames per second of the GIFs")
     parser.add_argument("--max-steps", type=int, default=80, help="episode step limit of the paper's episode")
     parser.add_argument("--intersection", action="store_true", help="also an intersection-v1 episode")
-    parser.add_argument("--intersection-seed", type=int, default=0)
-    return parser.parse_args(argv)
+    parser.add_argument(
+        "--intersection-seed", type=int, default=0, help="seed of the intersection-v1 episode"
+    )
+    return parser
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    return build_parser().parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> list[Path]:

@@ -73,6 +73,7 @@ class EpisodeRecord:
     reports: list[Any] = field(default_factory=list)
     """(steps,) the agent's ``last_solve`` after each step (None for agents without one)."""
     info: dict[str, Any] = field(default_factory=dict)
+    """The env's ``info`` after the last step (``episode_risk``: the episode's summed risk)."""
 
     @property
     def steps(self) -> int:
@@ -143,4 +144,5 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         success=bool(info.get("is_success", False)),
         epsilon=float(env.unwrapped.scenario.risk_tolerance),
         reports=reports,
+        info=info,
     )

@@ -2,13 +2,24 @@
 
     python -m benchmarks.sampled                       # the headline table (200 episodes each)
     python -m benchmarks.sampled --episodes 20 --agents smpc:exact --tolerances 0,2500
+    python -m benchmarks.sampled --severities paper,probability,injury \
+        --tolerances paper=0,1000,2500 --tolerances probability=0,0.01 --tolerances injury=0,0.005
 
 With ``object_motion="sampled"`` the object's true next position and speed are drawn from the
 very prediction model the agents plan with, so the env's per-step risk R_{k+1|k} is the exact
 expected harm of the next step. The question: does the tolerance epsilon bound what happens?
-Reported per configuration: collision rate (Wilson 95% interval), mean and 95th percentile of the
-per-step risk, the share of steps whose risk exceeded epsilon, the realised harm per step (mean of
-I_C s over the steps that happened: it should match the mean risk), e_acc and d_min.
+
+Tolerances are taken in each severity's own unit (J, probability, injuries; the ``unit`` column),
+and a value that cannot be one (a probability above 1, more than 2 injuries per step) is an error.
+Reported per configuration: the collision rate per episode (Wilson 95% interval), mean and 95th
+percentile of the per-step risk, the share of steps whose risk exceeded epsilon, the realised
+harm per step (mean of I_C s over the steps that happened: it should match the mean risk), the
+episode's summed risk (``info["episode_risk"]``, mean and max over episodes), the realised harm
+per episode (it should match the mean episode risk), e_acc, d_min and the goal rate.
+
+The per-episode columns are what an episode risk budget B is judged by (episode risk against B,
+collision rate per episode against B with the probability severity): a budget row needs only a
+``Job`` field passed on to the agent as ``risk_budget=B``.
 """
 
 from __future__ import annotations
@@ -23,12 +34,15 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import cli
 from benchmarks.rollout import AGENTS, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
+from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 COLUMNS = (
     "agent",
     "severity",
+    "unit",
     "uncertainty",
     "epsilon",
     "episodes",
@@ -39,6 +53,9 @@ COLUMNS = (
     "risk_p95",
     "violation_rate",
     "harm_per_step",
+    "episode_risk_mean",
+    "episode_risk_max",
+    "harm_per_episode",
     "e_acc_mean",
     "d_min_mean",
     "d_min_min",
@@ -101,6 +118,7 @@ def run_job(job: Job) -> list[dict[str, Any]]:
                 "success": rec.success,
                 "risk": rec.risk,
                 "harm": harm,
+                "episode_risk": float(rec.info["episode_risk"]),
                 "violations": int(np.sum(rec.risk > job.epsilon * (1 + 1e-6) + 1e-9)),
                 "e_acc": rec.e_acc,
                 "d_min": rec.d_min,
@@ -114,26 +132,39 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     return out
 
 
+def _sig(x: float, digits: int = 4) -> float:
+    """``x`` rounded to ``digits`` significant digits (risks span J to 1e-6 injuries)."""
+    return float(f"{x:.{digits}g}")
+
+
 def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
+    from risk_env.scenario import Scenario
+    from risk_env.severity import make_severity
+
     n = len(episodes)
     collisions = sum(e["collision"] for e in episodes)
     lo, hi = wilson(collisions, n)
     risk = np.concatenate([e["risk"] for e in episodes])
     harm = np.concatenate([e["harm"] for e in episodes])
+    episode_risk = np.array([e["episode_risk"] for e in episodes])
     solve = np.concatenate([e["solve_ms"] for e in episodes])
     return {
         "agent": job.agent,
         "severity": job.severity,
+        "unit": make_severity(Scenario(severity=job.severity)).unit,
         "uncertainty": job.uncertainty,
         "epsilon": job.epsilon,
         "episodes": n,
         "collision_rate": round(collisions / n, 4),
         "collision_ci_low": round(lo, 4),
         "collision_ci_high": round(hi, 4),
-        "risk_mean": round(float(risk.mean()), 3),
-        "risk_p95": round(float(np.percentile(risk, 95)), 3),
+        "risk_mean": _sig(risk.mean()),
+        "risk_p95": _sig(np.percentile(risk, 95)),
         "violation_rate": round(sum(e["violations"] for e in episodes) / len(risk), 4),
-        "harm_per_step": round(float(harm.mean()), 3),
+        "harm_per_step": _sig(harm.mean()),
+        "episode_risk_mean": _sig(episode_risk.mean()),
+        "episode_risk_max": _sig(episode_risk.max()),
+        "harm_per_episode": _sig(harm.sum() / n),
         "e_acc_mean": round(float(np.mean([e["e_acc"] for e in episodes])), 2),
         "d_min_mean": round(float(np.mean([e["d_min"] for e in episodes])), 2),
         "d_min_min": round(float(np.min([e["d_min"] for e in episodes])), 2),
@@ -149,20 +180,24 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     lines = [
         "# Sampled object motion: does epsilon bound what happens?",
         "",
-        "Risk in the severity's unit (J, or probability). Harm/step = mean realised I_C s per step;",
-        "with calibrated risk it matches Risk mean (both are per-step expected harm).",
+        "Risks, eps and harm in the severity's own unit (given with eps). Harm/step = mean realised",
+        "I_C s per step; with calibrated risk it matches Risk mean (both are per-step expected harm).",
+        "Episode risk = info['episode_risk'], the summed risk of an episode (mean and max over",
+        "episodes); harm/episode is its realised counterpart. Collisions: share of episodes.",
         "",
-        "| agent | severity | unc. | eps | episodes | collisions [95% CI] | risk mean | risk p95 |"
-        " steps > eps | harm/step | e_acc | d_min mean (min) | goal | fallbacks (soft / manoeuvre) |",
-        "|" + " --- |" * 14,
+        "| agent | severity | unc. | eps | episodes | collisions/episode [95% CI] | risk mean | risk p95 |"
+        " steps > eps | harm/step | episode risk mean (max) | harm/episode | e_acc | d_min mean (min) |"
+        " goal | fallbacks (soft / manoeuvre) |",
+        "|" + " --- |" * 16,
     ]
     for r in rows:
         lines.append(
-            f"| {r['agent']} | {r['severity']} | {r['uncertainty']} | {r['epsilon']:g} | {r['episodes']} | "
-            f"{100 * r['collision_rate']:.1f}% "
+            f"| {r['agent']} | {r['severity']} | {r['uncertainty']} | {r['epsilon']:g} {r['unit']} | "
+            f"{r['episodes']} | {100 * r['collision_rate']:.1f}% "
             f"[{100 * r['collision_ci_low']:.1f}, {100 * r['collision_ci_high']:.1f}] | "
             f"{r['risk_mean']:.3g} | {r['risk_p95']:.3g} | {100 * r['violation_rate']:.1f}% | "
-            f"{r['harm_per_step']:.3g} | {r['e_acc_mean']:.1f} | "
+            f"{r['harm_per_step']:.3g} | {r['episode_risk_mean']:.3g} ({r['episode_risk_max']:.3g}) | "
+            f"{r['harm_per_episode']:.3g} | {r['e_acc_mean']:.1f} | "
             f"{r['d_min_mean']:.1f} ({r['d_min_min']:.1f}) | "
             f"{100 * r['goal_rate']:.0f}% | "
             f"{r['failed_solves']} ({r['fallback_soft']} / {r['fallback_manoeuvre']}) |"
@@ -170,21 +205,46 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.sampled", description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.sampled``."""
+    p = cli.parser("sampled", __doc__)
     p.add_argument(
         "--agents",
         default=None,
-        help=f"comma list from {list(AGENTS)} (default: all but the grid RMPC; PPO with the rl extra)",
+        help=f"comma list from {', '.join(AGENTS)} (default: all but the grid RMPC; PPO with the rl extra)",
     )
-    p.add_argument("--severities", default="paper,plastic", help="comma list of paper, plastic, probability")
+    p.add_argument("--severities", default="paper,plastic", help=f"comma list of {', '.join(SEVERITY_NAMES)}")
     p.add_argument("--uncertainty", default="medium", help="comma list of low, medium, high")
-    p.add_argument("--tolerances", default="0,1000,2500", help="comma list of epsilon")
-    p.add_argument("--episodes", type=int, default=200, help="episodes per configuration (default 200)")
+    p.add_argument(
+        "--tolerances",
+        action="append",
+        metavar="[SEVERITY=]EPS,...",
+        help="comma list of epsilon in the severity's own unit (default 0,1000,2500); repeat as"
+        " SEVERITY=EPS,... to give a severity its own list",
+    )
+    p.add_argument("--episodes", type=int, default=200, help="seeded episodes per configuration")
     p.add_argument("--chunk", type=int, default=25, help="episodes per job (one agent build per job)")
-    p.add_argument("--out", type=Path, default=Path("results"))
-    p.add_argument("--workers", type=int, default=None)
-    p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results"),
+        help="output folder for sampled.csv and sampled.md; the committed ones are in docs/results",
+    )
+    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=False,
+        metavar="ADDRESS",
+        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
+        " (default: a process pool)",
+    )
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
     args = p.parse_args(argv)
     if args.agents is None:
         args.agents = [a for a in available_agents() if a != "rmpc:grid"]
@@ -193,30 +253,65 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     if bad := [a for a in args.agents if a not in AGENTS]:
         p.error(f"unknown agent(s) {bad}; expected from {list(AGENTS)}")
     args.severities = [s for s in args.severities.split(",") if s]
-    if bad := [s for s in args.severities if s not in ("paper", "plastic", "probability")]:
-        p.error(f"unknown severity {bad}")
+    if bad := [s for s in args.severities if s not in SEVERITY_NAMES]:
+        p.error(f"unknown severity {bad}; expected from {list(SEVERITY_NAMES)}")
     args.uncertainty = [u for u in args.uncertainty.split(",") if u]
-    if bad := [u for u in args.uncertainty if u not in ("low", "medium", "high")]:
-        p.error(f"unknown uncertainty {bad}")
-    args.tolerances = [float(t) for t in args.tolerances.split(",") if t]
+    if bad := [u for u in args.uncertainty if u not in UNCERTAINTY_PRESETS]:
+        p.error(f"unknown uncertainty {bad}; expected from {list(UNCERTAINTY_PRESETS)}")
+    try:
+        args.tolerances = parse_tolerances(args.tolerances or ["0,1000,2500"], args.severities)
+    except ValueError as error:
+        p.error(str(error))
     if args.episodes < 1 or args.chunk < 1:
         p.error("--episodes and --chunk must be >= 1")
     return args
 
 
-def scaled_tolerance(eps: float, severity: str) -> float:
-    """The probability severity is dimensionless: map the J tolerances onto [0, 1] (2500 J -> 0.25)."""
-    return eps / 10_000.0 if severity == "probability" else eps
+def parse_tolerances(groups: list[str], severities: list[str]) -> dict[str, list[float]]:
+    """``--tolerances`` values -> epsilon per severity, each in that severity's own unit.
+
+    A group ``"A,B"`` applies to every severity without a group of its own ``"NAME=A,B"``. Raises
+    ``ValueError`` naming a value that is not a number, or not one of its severity's unit
+    (:func:`risk_env.severity.check_tolerance`), and a severity left without tolerances.
+    """
+    from risk_env.severity import check_tolerance
+
+    common: list[float] | None = None
+    own: dict[str, list[float]] = {}
+    for group in groups:
+        name, sep, values = group.rpartition("=")
+        name = name.strip()
+        if sep and name not in severities:
+            raise ValueError(
+                f"--tolerances {group!r} names severity {name!r}, not one of --severities {severities}"
+            )
+        try:
+            numbers = [float(t) for t in values.split(",") if t.strip()]
+        except ValueError:
+            raise ValueError(f"--tolerances {group!r}: expected numbers separated by commas") from None
+        if sep:
+            own[name] = numbers
+        else:
+            common = numbers
+    out = {}
+    for severity in severities:
+        chosen = own.get(severity, common)
+        if not chosen:
+            raise ValueError(f"no tolerances for severity {severity!r}: pass --tolerances {severity}=EPS,...")
+        out[severity] = [
+            check_tolerance(e, severity, f"--tolerances value for severity {severity!r}") for e in chosen
+        ]
+    return out
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     args = parse_args(argv)
     configs = [
-        (a, s, u, scaled_tolerance(e, s))
+        (a, s, u, e)
         for a in args.agents
         for s in args.severities
         for u in args.uncertainty
-        for e in args.tolerances
+        for e in args.tolerances[s]
     ]
     jobs = [
         Job(a, s, u, e, tuple(range(start, min(start + args.chunk, args.episodes))))

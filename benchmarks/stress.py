@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import cli
 from benchmarks.scenes import Scene, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import run_sweep
 
@@ -212,12 +213,9 @@ def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command:
     return "\n".join(lines) + "\n"
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
-        prog="python -m benchmarks.stress",
-        description=__doc__.split("\n\n")[0],
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.stress`` (defaults shown in ``--help``)."""
+    p = cli.parser("stress", __doc__)
     p.add_argument("--scenes", type=int, default=200, help="number of random scenes per agent")
     p.add_argument("--seed", type=int, default=0, help="seed of the scene family")
     p.add_argument(
@@ -232,7 +230,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="wall-time cap of one MPC step [s] (default: the agents' own, 20%% of the sample time)",
     )
     p.add_argument("--solver", default=None, choices=("fatrop", "ipopt"), help="NLP solver (default: fatrop)")
-    p.add_argument("--out", type=Path, default=Path("results"), help="output folder")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results"),
+        help="output folder (the committed run is in docs/results/stress/)",
+    )
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument(
         "--ray",
@@ -242,6 +245,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         metavar="ADDRESS",
         help="run on Ray (an address, or local)",
     )
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
     args = p.parse_args(argv)
     args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
     if bad := [a for a in args.agents if a not in AGENTS]:

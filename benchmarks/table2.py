@@ -1,10 +1,13 @@
-"""The paper's Table II: RMPC and SMPC x low/medium/high uncertainty x six risk tolerances.
+"""The paper's Table II: RMPC and SMPC x low/medium/high uncertainty x six risk tolerances, for
+each risk method, and the shipped PPO policies on the same 36 configurations.
 
-    python -m benchmarks.table2                      # all risk methods, results/ folder
+    python -m benchmarks.table2                      # every agent, written to results/
     python -m benchmarks.table2 --methods rmpc:worst_case,smpc:exact --uncertainty low
 
 Writes ``table2.csv`` (one row per run), ``table2.md`` (our figures beside the paper's, the claims
-checklist, timing), ``table2_runs.npz`` (every trajectory) and the Fig. 3/4 PNGs.
+checklist, timing), ``table2_runs.npz`` (every trajectory), ``table2_meta.json`` and the Fig. 3/4
+PNGs. The terminal gets a one-screen summary (:func:`summary`): runs, collisions and failed solves
+per agent, and the paper's claims, with a reason for each one that does not hold.
 """
 
 from __future__ import annotations
@@ -19,9 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import cli
 from benchmarks.paper_table2 import PAPER, TOLERANCES
 from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_agent, rollout
+from benchmarks.summary import summary
 from benchmarks.sweep import run_sweep
+from risk_env.scenario import SEVERITY_NAMES, Scenario
 
 METHODS = AGENTS
 LEVELS = ("low", "medium", "high")
@@ -85,7 +91,9 @@ def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     record: EpisodeRecord = rollout(agent, env, seed=spec.seed)
     env.close()
     scenario = env.unwrapped.scenario
-    paper = PAPER.get((spec.method, spec.uncertainty, spec.epsilon), (float("nan"), float("nan")))
+    paper = (float("nan"), float("nan"))  # the paper's figures are for its severity only
+    if scenario.severity == "paper":
+        paper = PAPER.get((spec.method, spec.uncertainty, spec.epsilon), paper)
     solve_ms = 1e3 * record.solve_time
     row = {
         "method": spec.method,
@@ -102,7 +110,7 @@ def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         "solve_ms_median": round(float(np.median(solve_ms)), 3),
         "solve_ms_p95": round(float(np.percentile(solve_ms, 95)), 3),
         "solve_ms_max": round(float(solve_ms.max()), 3),
-        "max_risk": round(float(record.risk.max()), 3),
+        "max_risk": float(f"{record.risk.max():.4g}"),  # J to 1e-6 injuries
         "wall_s": round(time.perf_counter() - t0, 3),
         "paper_e_acc": paper[0],
         "paper_d_min": paper[1],
@@ -215,12 +223,15 @@ def markdown(
 ) -> str:
     lines = ["# Table II: ours beside the paper's", ""]
     lines.append("Each cell: ours (paper). e_acc = sum of ||e_k||; d_min [m]. `*` marks a collision.")
+    units = sorted({_unit(r.get("severity", "paper")) for r in rows})
+    lines.append(f"eps in the severity's unit: {', '.join(units)}.")
     order = {"RMPC": 0, "SMPC": 1, "PPO": 2}  # the paper's two, then the learned baseline
     groups = sorted({(r["method"], r["risk_method"]) for r in rows}, key=lambda g: (order[g[0]], g[1]))
     levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
     for method, risk in groups:
         kind = "training" if method == "PPO" else "risk"
-        lines += ["", f"## {method}, {kind}: {risk}", ""]
+        section = f"{method.lower()}-{risk}"  # a pymdownx.snippets section, for the docs
+        lines += ["", f"## {method}, {kind}: {risk}", "", f"<!-- --8<-- [start:{section}] -->"]
         header = "| eps | " + " | ".join(f"{lv} e_acc | {lv} d_min" for lv in levels) + " |"
         lines += [header, "|" + " --- |" * (1 + 2 * len(levels))]
         for eps in sorted({r["epsilon"] for r in rows}):
@@ -240,11 +251,12 @@ def markdown(
                 cells.append(f"{r['e_acc']:.1f}{star} ({_fmt(r['paper_e_acc'])})")
                 cells.append(f"{r['d_min']:.1f}{star} ({_fmt(r['paper_d_min'])})")
             lines.append(f"| {eps:g} | " + " | ".join(cells) + " |")
-    lines += ["", "## The paper's claims", ""]
+        lines.append(f"<!-- --8<-- [end:{section}] -->")
+    lines += ["", "## The paper's claims", "", "<!-- --8<-- [start:claims] -->"]
     for claim, ok, evidence in claims:
         verdict = "holds" if ok else ("not run" if ok is None else "**does not hold**")
         lines.append(f"- {claim}: {verdict} ({evidence})")
-    lines += ["", "## Timing", ""]
+    lines += ["<!-- --8<-- [end:claims] -->", "", "## Timing", "", "<!-- --8<-- [start:timing] -->"]
     lines.append(
         "| method | risk | runs | wall [s] | solve median [ms] | solve p95 [ms] | solve max [ms] |"
         " fallbacks (soft / manoeuvre) |"
@@ -259,7 +271,15 @@ def markdown(
             f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)}"
             f" ({sum(r['fallback_soft'] for r in sel)} / {sum(r['fallback_manoeuvre'] for r in sel)}) |"
         )
+    lines.append("<!-- --8<-- [end:timing] -->")
     return "\n".join(lines) + "\n"
+
+
+def _unit(severity: str) -> str:
+    """The unit of the severity named ``severity`` (J, probability, injuries)."""
+    from risk_env.severity import make_severity
+
+    return make_severity(Scenario(severity=severity)).unit
 
 
 def _fmt(x: float) -> str:
@@ -273,25 +293,52 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
         writer.writerows(rows)
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.table2", description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.table2``."""
+    p = cli.parser("table2", __doc__)
     p.add_argument(
         "--methods",
         default=None,
-        help=f"comma list of {', '.join(METHODS)} (default: all; PPO when the rl extra is installed)",
+        help=f"comma list of agents, from {', '.join(METHODS)} (default: all; PPO needs the rl extra)",
     )
-    p.add_argument("--uncertainty", default="low,medium,high", help="comma list of low, medium, high")
+    p.add_argument("--uncertainty", default="low,medium,high", help="comma list of Table I levels")
     p.add_argument(
-        "--tolerances", default=",".join(f"{t:g}" for t in TOLERANCES), help="comma list of epsilon [J]"
+        "--tolerances",
+        default=",".join(f"{t:g}" for t in TOLERANCES),
+        help="comma list of epsilon in the severity's unit (default: the paper's, in J)",
     )
     p.add_argument(
         "--v-ref", type=float, default=None, help="reference speed [m/s] (default: the Scenario's, 4)"
     )
-    p.add_argument("--severity", default=None, help="paper, plastic or probability (default: paper)")
-    p.add_argument("--out", type=Path, default=Path("results"), help="output folder (default: results/)")
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    p.add_argument("--ray", nargs="?", const="", default=False, metavar="ADDRESS", help="run on Ray")
+    p.add_argument(
+        "--severity",
+        default=None,
+        choices=SEVERITY_NAMES,
+        help="severity model (default: the Scenario's, paper); a severity other than paper needs"
+        " --tolerances in its own unit",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results"),
+        help="output folder; the committed results are rebuilt with --out docs/results",
+    )
+    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=False,
+        metavar="ADDRESS",
+        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
+        " (default: a process pool)",
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
     args = p.parse_args(argv)
     if args.methods is None:
         args.methods = available_agents()
@@ -312,6 +359,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--tolerances must be numbers, got {args.tolerances!r}")
     if any(t < 0 for t in args.tolerances):
         p.error("--tolerances must be >= 0")
+    from risk_env.severity import check_tolerance
+
+    try:
+        for t in args.tolerances:
+            check_tolerance(t, args.severity or "paper", "--tolerances value")
+    except ValueError as error:
+        p.error(str(error))
     return args
 
 
@@ -342,13 +396,12 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     (args.out / "table2_meta.json").write_text(
         json.dumps({"wall_s": wall, "args": _jsonable(vars(args))}, indent=2)
     )
-    written = [args.out / "table2.csv", args.out / "table2.md", args.out / "table2_runs.npz"]
+    written = [args.out / "table2.csv", args.out / "table2_runs.npz", args.out / "table2_meta.json"]
     if not args.no_figures:
         from benchmarks.figures import paper_figures
 
         written += paper_figures(rows, arrays, args.out)
-    print(markdown(rows, claims, wall))
-    print("Wrote:\n" + "\n".join(f"  {p}" for p in written))
+    print(summary(rows, claims, wall, args.out / "table2.md", written))
     return rows
 
 

@@ -2,7 +2,7 @@
 
     python -m benchmarks.train_ppo --out agents/models --name ppo_penalty          # the shipped policies
     python -m benchmarks.train_ppo --lagrangian --risk-weight 20 --out agents/models --name ppo_lagrangian
-    python -m benchmarks.train_ppo --total-timesteps 4096 --out /tmp/ppo   # a smoke run
+    python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
 Reward per step: ``-||e_{k+1}|| - beta * cost`` with cost = the env's risk R_{k+1|k} (the
 ``reward_risk_weight`` of the env). ``--lagrangian`` adapts beta after every rollout by dual
@@ -15,8 +15,11 @@ throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's CSV log in ``OUT/
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
+import inspect
 import json
+import textwrap
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,26 +27,32 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks import cli
+
 
 @dataclass
 class Args:
     """Every option of the training run (each is a ``--flag`` of the CLI)."""
 
     out: Path = Path("results/ppo")
-    """Where the model, its metadata, checkpoints and logs go."""
+    """Where the model, its metadata, checkpoints and logs go (the shipped policies are in
+    agents/models: replace them only with an explicit ``--out agents/models``)."""
     name: str = "model"
     """File name of the model (``NAME.zip``, ``NAME.json``)."""
     total_timesteps: int = 3_000_000
-    """Env steps to train for (over all copies)."""
+    """Env steps to train for, over all copies; rounded up to whole rollouts of
+    ``n_steps x num_envs`` env steps (PPO updates after each rollout)."""
     num_envs: int = 64
     """Copies of the env stepped as one batch."""
     seed: int = 0
+    """Seed of the env copies, the policy's initialisation and its sampling."""
     uncertainty: str = "medium"
     """The paper's uncertainty preset the policy trains against."""
     severity: str = "probability"
     """Severity of the training cost (the collision probability by default: a bounded cost, and
     no free collisions at matched kinetic energy as with the paper's severity)."""
     object_motion: str = "sampled"
+    """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
     randomize: bool = True
     """Train on seeded variations of the scenario (curvature, starts, object speed)."""
     risk_weight: float = 1000.0
@@ -60,12 +69,19 @@ class Args:
     n_steps: int = 128
     """Rollout length per copy between updates."""
     batch_size: int = 2048
+    """Minibatch size of the PPO updates [env steps]."""
     n_epochs: int = 5
+    """Passes over each rollout in the PPO update."""
     learning_rate: float = 3e-4
+    """Adam step size."""
     gamma: float = 0.99
+    """Discount factor."""
     gae_lambda: float = 0.95
+    """lambda of generalised advantage estimation."""
     ent_coef: float = 0.0
+    """Weight of the entropy bonus."""
     net_arch: tuple[int, ...] = (64, 64)
+    """Hidden layer widths of the policy and value networks."""
     log_std_init: float = 0.0
     """Initial log standard deviation of the Gaussian policy (exploration at the start)."""
     normalize_reward: bool = True
@@ -73,27 +89,63 @@ class Args:
     checkpoint_every: int = 500_000
     """Save a checkpoint every this many env steps (0: none)."""
     progress_bar: bool = True
+    """Show a progress bar (needs rich, part of the rl extra)."""
+
+
+def field_help() -> dict[str, str]:
+    """The docstring under each field of :class:`Args`, made plain: the help of its flag."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(Args)))
+    body = tree.body[0].body
+    helps: dict[str, str] = {}
+    for node, after in zip(body, body[1:]):
+        if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            if isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant):
+                helps[node.target.id] = cli.plain(str(after.value.value)).replace("\n", " ")
+    return helps
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.train_ppo``: one ``--flag`` per field of :class:`Args`."""
+    parser = cli.parser("train_ppo", __doc__)
+    helps = field_help()
+    choices = {
+        "uncertainty": ("low", "medium", "high"),
+        "severity": ("paper", "plastic", "probability"),
+        "object_motion": ("paper", "sampled"),
+    }
+    for f in dataclasses.fields(Args):
+        flag = "--" + f.name.replace("_", "-")
+        default = f.default
+        text = helps[f.name]
+        if isinstance(default, bool):
+            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=text)
+        elif isinstance(default, tuple):
+            parser.add_argument(flag, type=int, nargs="+", default=list(default), help=text)
+        else:
+            parser.add_argument(
+                flag, type=type(default), default=default, choices=choices.get(f.name), help=text
+            )
+    return parser
 
 
 def parse_args(argv: list[str] | None = None) -> Args:
     """The CLI: one ``--flag`` per field of :class:`Args`."""
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    for f in dataclasses.fields(Args):
-        flag = "--" + f.name.replace("_", "-")
-        default = f.default
-        if isinstance(default, bool):
-            parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default)
-        elif isinstance(default, tuple):
-            parser.add_argument(flag, type=int, nargs="+", default=list(default))
-        else:
-            parser.add_argument(flag, type=type(default), default=default)
+    parser = build_parser()
     args = Args(**vars(parser.parse_args(argv)))
     args.net_arch = tuple(args.net_arch)
-    if args.total_timesteps < 1 or args.num_envs < 1:
-        raise SystemExit("--total-timesteps and --num-envs must be >= 1")
+    if args.total_timesteps < 1 or args.num_envs < 1 or args.n_steps < 1:
+        parser.error("--total-timesteps, --num-envs and --n-steps must be >= 1")
     return args
+
+
+def planned_timesteps(args: Args) -> int:
+    """The env steps PPO will train: ``total_timesteps`` rounded up to whole rollouts.
+
+    stable-baselines3 collects a full rollout (``n_steps`` steps of each of the ``num_envs``
+    copies) before it checks the budget, so it trains a multiple of ``n_steps x num_envs``.
+    """
+    rollout = args.n_steps * args.num_envs
+    return -(-args.total_timesteps // rollout) * rollout
 
 
 def make_env(args: Args) -> Any:
@@ -223,5 +275,18 @@ def train(args: Args) -> dict[str, Any]:
     return metadata
 
 
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    """Parse the command line, say how many env steps will be trained, and train."""
+    args = parse_args(argv)
+    planned = planned_timesteps(args)
+    if planned != args.total_timesteps:
+        print(
+            f"--total-timesteps {args.total_timesteps} rounded up to {planned}: PPO trains whole rollouts"
+            f" of n_steps x num_envs = {args.n_steps} x {args.num_envs} = {args.n_steps * args.num_envs}"
+            " env steps"
+        )
+    return train(args)
+
+
 if __name__ == "__main__":
-    train(parse_args())
+    main()

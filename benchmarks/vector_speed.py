@@ -1,82 +1,190 @@
-"""Throughput of the vectorised ``RiskCrossing-v0``: env steps per second by vectorisation mode.
+"""Throughput of the vectorised ``RiskCrossing-v0`` beside Gymnasium's CartPole-v1 and Pendulum-v1,
+timed in the same run.
 
-    python -m benchmarks.vector_speed                      # 64 copies, the three modes, exact risk
-    python -m benchmarks.vector_speed --num-envs 1 8 64 --modes vector_entry_point
+    python -m benchmarks.vector_speed                        # 1, 64 and 1,024 copies, exact risk
+    python -m benchmarks.vector_speed --num-envs 1 8 64 --modes vector_entry_point sync async
+    python -m benchmarks.vector_speed --repeats 10 --out docs/results
 
-Random actions (the same for every mode) drive the copies, with seeded variations of the
-scenario (``randomize=True``) so that the batch holds states near and far from the object.
+Random actions (the same for every mode) drive the copies, with seeded variations of the scenario
+(``randomize=True``) so that the batch holds states near and far from the object; sampled object
+motion by default. Per row: the batch step [us], env steps/s, us per env step and that as a
+multiple of one ``gym.make("CartPole-v1")`` and ``gym.make("Pendulum-v1")`` step (seeded random
+actions). Each round runs every row (and the references) once, so that a busy spell of a shared
+machine slows them alike; shown is each row's best round. Modes: ``vector_entry_point`` (our
+batched env; up to :data:`~risk_env.vector_env.SCALAR_COPIES` copies it steps them one by one in
+Python floats), ``numpy`` (the same env held to its numpy path, shown up to 64 copies), Gymnasium's
+``sync`` and ``async`` vector envs of single envs (up to ``--max-wrapped`` copies), and
+``CartPole-v1`` (Gymnasium's own batched CartPole, for scale). The summary gives the fixed cost
+(a batch step of 1 copy) and the cost per copy (from the smallest and largest batch).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import risk_env
+from benchmarks import cli
+from benchmarks.env_speed import REFERENCES, step_times, stepper
 
-MODES = ("vector_entry_point", "sync", "async")
+MODES = ("vector_entry_point", "numpy", "sync", "async", "CartPole-v1")
+TARGETS = ((64, 100_000), (1024, 500_000))
+"""Issue 15's targets for the batched env (exact risk, sampled motion): env steps/s at these
+batch sizes; and a fixed cost of at most :data:`FIXED_COST` [s]."""
+FIXED_COST = 100e-6
 
 
-def throughput(mode: str, num_envs: int, steps: int, repeats: int, **env_kwargs) -> float:
-    """Best of ``repeats`` runs of ``steps`` batch steps: env steps per second (copies x steps / s)."""
-    env = gym.make_vec(risk_env.ENV_ID, num_envs=num_envs, vectorization_mode=mode, **env_kwargs)
-    space = env.unwrapped.single_action_space
-    rng = np.random.default_rng(0)
-    actions = rng.uniform(space.low, space.high, size=(steps, num_envs, 2)).astype(np.float32)
-    best = np.inf
-    for _ in range(repeats):
+def batch_stepper(mode: str, num_envs: int, steps: int, **env_kwargs) -> tuple[Callable[[], float], gym.Env]:
+    """A function timing ``steps`` batch steps of a fresh episode (seconds per batch step) of
+    ``mode`` with ``num_envs`` copies, and the env (to close)."""
+    if mode == "CartPole-v1":
+        env = gym.make_vec(mode, num_envs=num_envs, vectorization_mode="vector_entry_point")
+    else:
+        vectorization = "vector_entry_point" if mode == "numpy" else mode
+        env = gym.make_vec(risk_env.ENV_ID, num_envs=num_envs, vectorization_mode=vectorization, **env_kwargs)
+        if mode == "numpy":
+            env.unwrapped.scalar_copies = 0
+    space = env.single_action_space
+    space.seed(0)
+    actions = np.array([[space.sample() for _ in range(num_envs)] for _ in range(steps)])
+
+    def run() -> float:
         env.reset(seed=0)
         start = time.perf_counter()
         for action in actions:
             env.step(action)
-        best = min(best, time.perf_counter() - start)
-    env.close()
-    return steps * num_envs / best
+        return (time.perf_counter() - start) / steps
+
+    return run, env
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.vector_speed``."""
+    parser = cli.parser("vector_speed", __doc__)
+    parser.add_argument("--num-envs", type=int, nargs="+", default=[1, 64, 1024], help="batch sizes (copies)")
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        choices=MODES,
+        default=["vector_entry_point", "numpy", "sync", "CartPole-v1"],
+        help="what to time (see above)",
+    )
+    parser.add_argument(
+        "--estimators", nargs="+", choices=risk_env.ESTIMATOR_NAMES, default=["exact"], help="risk estimators"
+    )
+    parser.add_argument(
+        "--object-motion", choices=risk_env.OBJECT_MOTIONS, default="sampled", help="the object's true motion"
+    )
+    parser.add_argument("--steps", type=int, default=200, help="batch steps per run")
+    parser.add_argument("--repeats", type=int, default=5, help="runs per row (the best is kept)")
+    parser.add_argument("--max-wrapped", type=int, default=64, help="most copies for sync and async")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="also write the table to OUT/vector_speed.txt (default: print only; the committed one"
+        " is in docs/results)",
+    )
+    return parser
 
 
 def main(argv: list[str] | None = None) -> str:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--num-envs", type=int, nargs="+", default=[64])
-    parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
-    parser.add_argument("--estimators", nargs="+", choices=risk_env.ESTIMATOR_NAMES, default=["exact"])
-    parser.add_argument("--object-motion", choices=risk_env.OBJECT_MOTIONS, default="sampled")
-    parser.add_argument("--steps", type=int, default=200, help="batch steps per run")
-    parser.add_argument("--repeats", type=int, default=3, help="runs per row (best is kept)")
-    parser.add_argument("--out", type=Path, default=None, help="also write the table to OUT/vector_speed.txt")
+    parser = build_parser()
     args = parser.parse_args(argv)
+    if min(args.num_envs) < 1 or args.steps < 1 or args.repeats < 1:
+        parser.error("--num-envs, --steps and --repeats must be >= 1")
 
-    lines = [
-        f"RiskCrossing-v0 vectorised throughput (randomize=True, object_motion={args.object_motion},"
-        f" {args.steps} batch steps, best of {args.repeats})",
-        f"{'mode':>20} {'estimator':>12} {'copies':>7} {'env steps/s':>12} {'us/step':>9}",
-    ]
-    print("\n".join(lines), flush=True)
+    reference_steps = 2000
+    references = {name: stepper(name, reference_steps) for name in REFERENCES}
+    ref = dict.fromkeys(REFERENCES, float("inf"))
+    rows: dict[tuple[str, str, int], float] = {}
+    runners = {}
     for estimator in args.estimators:
         for num_envs in args.num_envs:
             for mode in args.modes:
-                rate = throughput(
-                    mode,
-                    num_envs,
-                    args.steps,
-                    args.repeats,
-                    risk_estimator=estimator,
-                    randomize=True,
-                    object_motion=args.object_motion,
-                )
-                line = f"{mode:>20} {estimator:>12} {num_envs:>7} {rate:>12,.0f} {1e6 / rate:>9.1f}"
-                print(line, flush=True)
-                lines.append(line)
+                if mode in ("sync", "async") and num_envs > args.max_wrapped:
+                    continue
+                if mode == "numpy" and num_envs > 64:
+                    continue
+                if mode == "CartPole-v1" and estimator != args.estimators[0]:
+                    continue
+                kwargs = {"risk_estimator": estimator, "randomize": True, "object_motion": args.object_motion}
+                key = (mode, "-" if mode == "CartPole-v1" else estimator, num_envs)
+                runners[key] = batch_stepper(mode, num_envs, args.steps, **kwargs)
+                rows[key] = float("inf")
+    for round_ in range(args.repeats):  # every row once per round: a busy spell slows them alike
+        for name, t in step_times(references, reference_steps, 1).items():
+            ref[name] = min(ref[name], t)
+        for key, (run, _) in runners.items():
+            rows[key] = min(rows[key], run())
+        print(f"  round {round_ + 1}/{args.repeats} done", flush=True)
+    for _, env in runners.values():
+        env.close()
+    cartpole, pendulum = (ref[name] for name in REFERENCES)
+
+    lines = [
+        f"RiskCrossing-v0 vectorised throughput beside Gymnasium's classic control, timed in the same"
+        f" run (randomize=True, object_motion={args.object_motion}, random actions, {args.steps} batch"
+        f" steps, best of {args.repeats})",
+        "",
+        "reference (gym.make, one env)   us/step",
+        *(f"{name:<32}{1e6 * ref[name]:>8.1f}" for name in REFERENCES),
+        "",
+        f"{'mode':>20} {'estimator':>10} {'copies':>7} {'batch step [us]':>16} {'env steps/s':>12}"
+        f" {'us/env step':>12} {'x CartPole':>11} {'x Pendulum':>11}",
+    ]
+    for (mode, estimator, num_envs), t in rows.items():
+        per = t / num_envs
+        lines.append(
+            f"{mode:>20} {estimator:>10} {num_envs:>7} {1e6 * t:>16.1f} {1.0 / per:>12,.0f}"
+            f" {1e6 * per:>12.2f} {per / cartpole:>11.3f} {per / pendulum:>11.3f}"
+        )
+    lines += ["", *summary(rows, args.estimators, pendulum)]
     text = "\n".join(lines) + "\n"
+    print(text, end="")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "vector_speed.txt").write_text(text)
     return text
+
+
+def summary(rows: dict[tuple[str, str, int], float], estimators: list[str], pendulum: float) -> list[str]:
+    """Fixed cost and cost per copy of the batched env per estimator, and issue 15's targets."""
+    out = []
+    for estimator in estimators:
+        for mode in ("vector_entry_point", "numpy"):
+            times = {n: t for (m, e, n), t in rows.items() if m == mode and e == estimator}
+            if not times:
+                continue
+            lo, hi = min(times), max(times)
+            line = f"{mode} ({estimator}): fixed cost {1e6 * times[lo]:.1f} us (a batch of {lo})"
+            line += f" = {times[lo] / pendulum:.2f} Pendulum-v1 steps"
+            if hi > lo:
+                per_copy = (times[hi] - times[lo]) / (hi - lo)
+                line += f"; per copy {1e6 * per_copy:.2f} us (batches of {lo} and {hi})"
+            out.append(line)
+            if mode != "vector_entry_point" or estimator != "exact":
+                continue
+            checks = []
+            if 1 in times:
+                ok = _verdict(times[1] <= FIXED_COST)
+                checks.append(f"fixed cost {1e6 * times[1]:.0f} us <= {1e6 * FIXED_COST:.0f} us: {ok}")
+            for n, rate in TARGETS:
+                if n in times:
+                    got = n / times[n]
+                    checks.append(f"{n} copies {got:,.0f} >= {rate:,} env steps/s: {_verdict(got >= rate)}")
+            if checks:
+                out.append("Targets: " + "; ".join(checks))
+    return out
+
+
+def _verdict(ok: bool) -> str:
+    return "met" if ok else "NOT met"
 
 
 if __name__ == "__main__":

@@ -18,14 +18,14 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from risk_env import dynamics, observation
-from risk_env.ops import NUMPY
+from risk_env import checks, observation
+from risk_env.checks import ACTION_TOLERANCE, slack  # noqa: F401  (ACTION_TOLERANCE: public here too)
+from risk_env.ops import MATH
 from risk_env.path import project
-from risk_env.prediction import predict
 from risk_env.renderers import RENDERERS, make_renderer
 from risk_env.risk import RiskEstimator, make_estimator
 from risk_env.scenario import OVERRIDES, Scenario
-from risk_env.transition import move_object, observe, reward_terms
+from risk_env.transition import advance_one, observe, reward_terms
 from risk_env.variations import Variations, vary
 
 ENV_ID = "RiskCrossing-v0"
@@ -33,24 +33,6 @@ OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
 """How the object moves: ``"paper"`` (deterministic unicycle) or ``"sampled"`` (one draw per step
 from the prediction model)."""
 """Who draws: highway-env's graphics, the basic pygame view, or ``"auto"`` (highway-env's if installed)."""
-ACTION_TOLERANCE = 1e-6
-"""Actions may exceed the Box by this much [m/s, rad/s] (float32 rounding); they are applied as given."""
-
-_POSITION_BOUND = 1e5
-"""Bound [m] of positions, arc length and position errors in the observation Box."""
-_RATE_BOUND = 1e3
-"""Bound [m/s, rad/s] of speeds, turn rates and the speed error in the observation Box."""
-
-
-def _observation_bounds() -> np.ndarray:
-    """Upper bounds of the observation Box (the lower ones are their negatives), float32 ``(15,)``."""
-    high = np.full(observation.SIZE, _POSITION_BOUND, dtype=np.float32)
-    for index in (2, 7, 13):  # ego heading, object heading, heading error: wrapped to [-pi, pi)
-        high[index] = np.pi
-    high[observation.EGO_INPUT] = _RATE_BOUND
-    high[observation.OBJECT_INPUT] = _RATE_BOUND
-    high[14] = _RATE_BOUND  # speed error
-    return high
 
 
 class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -76,15 +58,17 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     | 0 | ego speed v | m/s | [-4, 8] (``v_min``, ``v_max``; negative reverses) |
     | 1 | ego turn rate omega | rad/s | [-0.8, 0.8] (``omega_max``) |
 
-    The env clips nothing: an action outside the Box (by more than 1e-6), with a NaN or of a shape
-    other than ``(2,)`` raises ``ValueError``. The rate limits ``accel_max`` and
-    ``omega_rate_max`` of the scenario are **not** enforced by the env; the MPC agents respect
-    them themselves.
+    The env clips nothing: an action outside the Box (by more than 1e-6, relative for limits
+    above 1: float32 rounding), with a NaN, of a shape other than ``(2,)`` or not of real numbers
+    (bools, strings, complex numbers) raises ``ValueError``; float and int arrays, lists and
+    tuples of numbers pass. The rate limits ``accel_max`` and ``omega_rate_max`` of the scenario
+    are **not** enforced by the env; the MPC agents respect them themselves.
 
     ## Observation Space
 
     ``Box((15,), float32)`` with finite bounds (1e5 for positions, arc length and position
-    errors, pi for headings, 1e3 for speeds and turn rates); the layout is
+    errors, pi for headings, 1e3 for speeds and turn rates), the same for every scenario: the
+    scenario rejects what could leave them within an episode. The layout and the bounds are
     :mod:`risk_env.observation` (``RiskCrossingEnv.observation_slices`` names its parts):
 
     | index | observation | unit |
@@ -141,7 +125,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
       goal is reached without a collision);
     - truncated: after ``scenario.max_steps`` steps (80 by default).
 
-    Stepping on after the episode has ended is not guarded; call ``reset``.
+    Stepping on after the episode has ended raises ``gymnasium.error.ResetNeeded`` until
+    ``reset`` (the batched env resets ended copies itself).
 
     ## Arguments
 
@@ -175,6 +160,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     | key | value |
     | --- | --- |
     | ``risk``, ``cost`` | R_{k+1|k} (float) |
+    | ``episode_risk`` | sum of ``risk`` since ``reset`` (float): Safety-Gymnasium's per-episode cost |
     | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
     | ``collision`` | ``distance <= r_e + r_o`` (bool) |
     | ``distance`` | centre distance ego-object after the step [m] (float) |
@@ -226,12 +212,12 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             raise TypeError(f"variations must be a risk_env.Variations, got {type(variations).__name__}")
         if variations is not None and not randomize:
             raise ValueError("variations= is used only with randomize=True")
-        self.randomize = bool(randomize)
+        self.randomize = checks.flag("randomize", randomize)
         self.variations: Variations = Variations() if variations is None else variations
         if object_motion not in OBJECT_MOTIONS:
             raise ValueError(f"unknown object_motion {object_motion!r}; expected one of {OBJECT_MOTIONS}")
         self.object_motion = object_motion
-        weight = float(reward_risk_weight)
+        weight = checks.real("reward_risk_weight", reward_risk_weight)
         if not (math.isfinite(weight) and weight >= 0.0):
             raise ValueError(f"reward_risk_weight must be finite and >= 0, got {reward_risk_weight!r}")
         self.reward_risk_weight = weight
@@ -252,15 +238,17 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             high=np.array([ego.v_max, ego.omega_max], dtype=np.float32),
             dtype=np.float32,
         )
-        high = _observation_bounds()
+        high = observation.bounds()
         self.observation_space = spaces.Box(low=-high, high=high, dtype=np.float32)
 
         self._ego_pose: tuple[float, float, float] = self.scenario.ego.start.as_tuple()  # unwrapped
         self._ego_input: tuple[float, float] = ego.initial_input
         self._object: tuple[float, float, float, float, float] | None = None  # c1, c2, theta, v, omega
         self._steps = 0
+        self._ended: str | None = None  # why the episode ended, until reset
         self._plan: np.ndarray | None = None
         self._last_risk = 0.0
+        self._episode_risk = 0.0
         self._renderer: Any = None
 
     # ---------------------------------------------------------------- properties
@@ -296,7 +284,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start a new episode (the scenario's start, or a drawn variation of it with
         ``randomize=True``); ``options`` takes no keys."""
-        super().reset(seed=seed)
+        super().reset(seed=None if seed is None else checks.integer("seed", seed, minimum=0))
         if options:
             raise ValueError(f"RiskCrossing-v0 takes no reset options, got {sorted(options)}")
         if self.randomize:
@@ -305,10 +293,12 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         s = self.scenario
         self._ego_pose = s.ego.start.as_tuple()
         self._ego_input = s.ego.initial_input
-        self._object = (*s.object.start.as_tuple(), s.object.speed, s.object.turn_rate)
+        self._object = (*s.object.start.as_tuple(), float(s.object.speed), float(s.object.turn_rate))
         self._steps = 0
+        self._ended = None
         self._plan = None
         self._last_risk = 0.0
+        self._episode_risk = 0.0
         obs, info, _ = self._observe(risk=0.0, stepped=False)
         if self.render_mode == "human":
             self.render()
@@ -317,26 +307,28 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     def step(self, action: np.ndarray) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         """Apply ``action = (v [m/s], omega [rad/s])`` for one sample time (see the class docstring)."""
         self._require_reset()
+        if self._ended is not None:
+            raise gym.error.ResetNeeded(f"the episode has ended ({self._ended}); call env.reset() to step on")
         s = self.scenario
         v, omega = self._check_action(action)
-        # 1. the ego moves (dynamics.step's unicycle, called on floats: no array round trip)
-        x, y, theta = dynamics.unicycle_step(*self._ego_pose, v, omega, s.dt, NUMPY)
-        self._ego_pose = (float(x), float(y), float(theta))
+        # 1.-3. the ego moves (dynamics.step's unicycle); the object moves from its one-step
+        # belief B, made from its measurement before the move; the risk R_{k+1|k} of the ego's new
+        # state against B. Python floats throughout: numpy's per-call cost would dominate.
+        uniforms = self.np_random.random(3).tolist() if self.object_motion == "sampled" else None
+        self._ego_pose, self._object, risk = advance_one(
+            s, self.estimator, self._ego_pose, (v, omega), self._object, uniforms, self.np_random
+        )
         self._ego_input = (v, omega)
-        # 2. the object moves; B = its one-step belief from the measurement before the move
-        belief = predict(s, self._object, steps=1)[1]
-        uniforms = self.np_random.random(3) if self.object_motion == "sampled" else None
-        self._object = tuple(float(a) for a in move_object(belief, self._object, uniforms))
-        # 3. the risk R_{k+1|k} of the ego's new state against B
-        ego_state = np.array((*self._ego_pose, v))
-        risk = float(self.estimator.risk(ego_state, belief, rng=self.np_random))
         self._last_risk = risk
+        self._episode_risk += risk
         self._steps += 1
         # 4. reward terms, episode end, observation, info
         obs, info, goal = self._observe(risk, stepped=True)
-        reward = sum(info["rewards"].values())
+        reward = info["rewards"]["path_error"] + info["rewards"]["risk"]
         terminated = info["collision"] or goal
         truncated = self._steps >= s.max_steps
+        if terminated or truncated:
+            self._ended = checks.episode_end(info["collision"], goal, self._steps, s.max_steps)
         if self.render_mode == "human":
             self.render()
         return obs, reward, terminated, truncated, info
@@ -398,10 +390,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def _check_action(self, action: Any) -> tuple[float, float]:
         """The action as ``(v, omega)`` floats; raises ``ValueError`` on anything the Box rejects."""
-        try:
-            a = np.asarray(action, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"action must be 2 numbers (v [m/s], omega [rad/s]), got {action!r}") from None
+        a = checks.real_array(action, "action", "2 numbers (v [m/s], omega [rad/s])")
         if a.shape != (2,):
             raise ValueError(
                 f"action must have shape (2,) = (v [m/s], omega [rad/s]), got shape {a.shape}: {action!r}"
@@ -410,12 +399,14 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if not (math.isfinite(v) and math.isfinite(omega)):
             raise ValueError(f"action must be finite, got (v, omega) = ({v}, {omega})")
         ego = self.scenario.ego
-        if not ego.v_min - ACTION_TOLERANCE <= v <= ego.v_max + ACTION_TOLERANCE:
+        if not (
+            ego.v_min <= v <= ego.v_max or ego.v_min - slack(ego.v_min) <= v <= ego.v_max + slack(ego.v_max)
+        ):
             raise ValueError(
                 f"action v = {v} m/s lies outside [v_min, v_max] = [{ego.v_min}, {ego.v_max}]"
                 " (the env clips nothing)"
             )
-        if not abs(omega) <= ego.omega_max + ACTION_TOLERANCE:
+        if not (abs(omega) <= ego.omega_max or abs(omega) <= ego.omega_max + slack(ego.omega_max)):
             raise ValueError(
                 f"action omega = {omega} rad/s lies outside [-omega_max, omega_max] ="
                 f" [{-ego.omega_max}, {ego.omega_max}] (the env clips nothing)"
@@ -425,22 +416,24 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     def _observe(self, risk: float, stepped: bool) -> tuple[np.ndarray, dict[str, Any], bool]:
         """Observation, info and whether the goal is reached; the reward terms are 0 at reset."""
         s = self.scenario
-        seen = observe(
-            s.path, s.ego.v_ref, s.collision_distance, self._ego_pose, self._ego_input, self._object
-        )
-        terms = reward_terms(seen.path_error, risk, self.reward_risk_weight)
-        rewards = {name: float(value) if stepped else 0.0 for name, value in terms.items()}
-        collision, goal = bool(seen.collision), bool(seen.goal)
+        pose, obj = self._ego_pose, self._object
+        seen = observe(s.path, s.ego.v_ref, s.collision_distance, pose, self._ego_input, obj, MATH)
+        if stepped:
+            rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
+        else:
+            rewards = {"path_error": 0.0, "risk": 0.0}
+        collision, goal = seen.collision, seen.goal
         info = {
             "risk": risk,
             "cost": risk,
+            "episode_risk": self._episode_risk,
             "risk_violation": risk > s.risk_tolerance,
             "collision": collision,
-            "distance": float(seen.distance),
+            "distance": seen.distance,
             "path_error": seen.path_error,
-            "lambda": float(seen.lam),
-            "ego": np.array((*self._ego_pose, self._ego_input[0])),
-            "object": np.array(self._object[:4]),
+            "lambda": seen.lam,
+            "ego": np.array((pose[0], pose[1], pose[2], self._ego_input[0])),
+            "object": np.array(obj[:4]),
             "rewards": rewards,
             "is_success": goal and not collision,
         }

@@ -12,13 +12,14 @@ stepped with the same formulas.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from risk_env.ops import NUMPY, Ops
-from risk_env.scenario import ReferencePath
+from risk_env.scenario import Pose, ReferencePath
 
 
 @dataclass
@@ -26,6 +27,15 @@ class _GoalBatch:
     x: np.ndarray
     y: np.ndarray
     theta: np.ndarray
+    cos: np.ndarray
+    """cos(theta), kept with it (the goal is a parameter, not a variable)."""
+    sin: np.ndarray
+    """sin(theta)."""
+
+    @classmethod
+    def of(cls, x: Any, y: Any, theta: Any) -> _GoalBatch:
+        """Goal poses from ``(B,)`` arrays (or floats)."""
+        return cls(x, y, theta, np.cos(theta), np.sin(theta))
 
 
 @dataclass
@@ -37,8 +47,8 @@ class PathBatch:
 
     curvature: np.ndarray
     """kappa ``(B,)`` [1/m]."""
-    goal: _GoalBatch
-    """Goal poses: ``x``, ``y`` [m], ``theta`` [rad], each ``(B,)``."""
+    goal: _GoalBatch | Pose
+    """Goal poses: ``x``, ``y`` [m], ``theta`` [rad], each ``(B,)``; or one goal for every entry."""
     lambda_goal: float = 0.0
 
     @classmethod
@@ -47,13 +57,23 @@ class PathBatch:
         g = path.goal
         return cls(
             np.full(size, path.curvature),
-            _GoalBatch(np.full(size, g.x), np.full(size, g.y), np.full(size, g.theta)),
+            _GoalBatch.of(np.full(size, g.x), np.full(size, g.y), np.full(size, g.theta)),
         )
 
     def set(self, index: int | np.ndarray, path: ReferencePath) -> None:
-        """Make entry ``index`` equal to ``path``."""
+        """Make entry ``index`` (an int, index array or bool mask) equal to ``path``."""
         self.curvature[index] = path.curvature
-        self.goal.x[index], self.goal.y[index], self.goal.theta[index] = path.goal.as_tuple()
+        g = path.goal
+        self.goal.x[index], self.goal.y[index], self.goal.theta[index] = g.as_tuple()
+        self.goal.cos[index], self.goal.sin[index] = math.cos(g.theta), math.sin(g.theta)
+
+
+def _goal_frame(path: AnyPath) -> tuple[Any, Any, Any, Any, Any]:
+    """The goal's ``(x, y, theta, cos theta, sin theta)``: floats of a path, arrays of a batch."""
+    g = path.goal
+    if isinstance(g, Pose):
+        return g.x, g.y, g.theta, math.cos(g.theta), math.sin(g.theta)
+    return g.x, g.y, g.theta, g.cos, g.sin
 
 
 AnyPath = ReferencePath | PathBatch
@@ -67,21 +87,21 @@ def point(path: AnyPath, lam: Any, ops: Ops = NUMPY) -> tuple[Any, Any, Any]:
     lx = lam * ops.sinc(a)
     s = ops.sinc(0.5 * a)
     ly = lam * 0.5 * a * s * s
-    g = path.goal
-    cg, sg = np.cos(g.theta), np.sin(g.theta)
-    return g.x + cg * lx - sg * ly, g.y + sg * lx + cg * ly, g.theta + a
+    gx, gy, gth, cg, sg = _goal_frame(path)
+    return gx + cg * lx - sg * ly, gy + sg * lx + cg * ly, gth + a
 
 
 def project(path: AnyPath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
     """Arc length [m] of the closest point of the (continued) path to ``(x, y)`` [m]."""
-    g = path.goal
-    cg, sg = np.cos(g.theta), np.sin(g.theta)
-    px = cg * (x - g.x) + sg * (y - g.y)
-    py = -sg * (x - g.x) + cg * (y - g.y)
+    gx, gy, _, cg, sg = _goal_frame(path)
+    px = cg * (x - gx) + sg * (y - gy)
+    py = -sg * (x - gx) + cg * (y - gy)
     k = path.curvature
     # the angle subtended at the arc's centre, atan2(k px, 1 - k py), over k; px on a line
     if isinstance(k, np.ndarray):
         straight = k == 0.0
+        if not straight.any():
+            return ops.atan2(k * px, 1.0 - k * py) / k
         lam = ops.atan2(k * px, 1.0 - k * py) / np.where(straight, 1.0, k)
         return np.where(straight, px, lam)
     if k == 0.0:

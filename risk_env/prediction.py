@@ -1,4 +1,4 @@
-"""The object's prediction over the horizon (paper Sec. VI-C, with the SPEC's centring).
+"""The object's prediction over the horizon (paper Sec. VI-C, the truncation centred on the predicted mean).
 
 From a measurement ``(c1, c2, theta, v, omega)`` the mean follows the unicycle with the measured,
 constant inputs. At step n the position and the speed are independent truncated Gaussians:
@@ -11,6 +11,7 @@ constant inputs. At step n the position and the speed are independent truncated 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from risk_env.dynamics import unicycle_step
 from risk_env.ops import NUMPY, Ops
-from risk_env.scenario import Scenario
+from risk_env.scenario import Scenario, Uncertainty
 from risk_env.truncnorm import sample as truncnorm_sample
 from risk_env.truncnorm import transform as truncnorm_transform
 
@@ -78,16 +79,19 @@ class Belief:
         size = (size,) if isinstance(size, int) else tuple(size)
         return truncnorm_sample(*self._marginals(), rng, size)
 
-    def from_uniforms(self, u: np.ndarray) -> np.ndarray:
-        """The draws :meth:`sample` makes from the uniforms ``u (..., batch..., 3)`` on [0, 1)."""
-        return truncnorm_transform(u, *self._marginals())
+    def from_uniforms(self, u: Any, ops: Ops = NUMPY) -> Any:
+        """The draws :meth:`sample` makes from the uniforms on [0, 1): ``u (..., batch..., 3)``
+        -> ``(..., batch..., 3)`` (numpy), or 3 floats -> a list of 3 (:data:`~risk_env.ops.MATH`)."""
+        mean, sigma, lo, hi = self._marginals(ops)
+        return ops.elementwise(lambda *args: truncnorm_transform(*args, ops), u, mean, sigma, lo, hi)
 
-    def _marginals(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Mean, sigma, lower and upper bound of (c1, c2, v), each ``(batch..., 3)``."""
-        mean = np.stack(np.broadcast_arrays(self.x, self.y, self.speed), axis=-1)
-        sigma = np.stack(np.broadcast_arrays(self.sigma_x, self.sigma_y, self.sigma_v), axis=-1)
-        lo = np.stack(np.broadcast_arrays(self.x - self.half_x, self.y - self.half_y, self.v_lo), axis=-1)
-        hi = np.stack(np.broadcast_arrays(self.x + self.half_x, self.y + self.half_y, self.v_hi), axis=-1)
+    def _marginals(self, ops: Ops = NUMPY) -> tuple[Any, Any, Any, Any]:
+        """Mean, sigma, lower and upper bound of (c1, c2, v), each ``(batch..., 3)`` (a list of
+        3 with :data:`~risk_env.ops.MATH`)."""
+        mean = ops.stack([self.x, self.y, self.speed])
+        sigma = ops.stack([self.sigma_x, self.sigma_y, self.sigma_v])
+        lo = ops.stack([self.x - self.half_x, self.y - self.half_y, self.v_lo])
+        hi = ops.stack([self.x + self.half_x, self.y + self.half_y, self.v_hi])
         return mean, sigma, lo, hi
 
 
@@ -112,22 +116,44 @@ def predict(
     for n in range(steps + 1):
         if n > 0:
             x, y, th = unicycle_step(x, y, th, v, w, scenario.dt, ops)
-        out.append(
-            Belief(
-                x=x,
-                y=y,
-                theta=th,
-                speed=v,
-                sigma_x=u.sigma0[0] + n * u.sigma_growth[0],
-                sigma_y=u.sigma0[1] + n * u.sigma_growth[1],
-                sigma_v=u.sigma0[2] + n * u.sigma_growth[2],
-                half_x=u.box_half_width0[0] + n * u.box_growth[0],
-                half_y=u.box_half_width0[1] + n * u.box_growth[1],
-                v_lo=u.velocity_bounds0[0] - n * u.box_growth[2],
-                v_hi=u.velocity_bounds0[1] + n * u.box_growth[2],
-            )
-        )
+        out.append(_belief(u, n, x, y, th, v))
     return out
+
+
+def predict_step(scenario: Scenario, measurement: Any, step: int = 1, ops: Ops = NUMPY) -> Belief:
+    """``predict(scenario, measurement, step, ops)[step]`` alone: the belief at one prediction step
+    (the env's B at ``step=1``), without building the others."""
+    x, y, th, v, w = measurement
+    for _ in range(step):
+        x, y, th = unicycle_step(x, y, th, v, w, scenario.dt, ops)
+    return _belief(scenario.uncertainty, step, x, y, th, v)
+
+
+def _belief(u: Any, n: int, x: Any, y: Any, th: Any, v: Any) -> Belief:
+    """The belief at prediction step ``n`` around the mean ``(x, y, th, v)``; spreads of ``u``."""
+    if isinstance(u, Uncertainty):  # numbers: the spreads once per (u, n), a lean constructor
+        belief = object.__new__(Belief)
+        belief.__dict__.update(x=x, y=y, theta=th, speed=v, **_spreads(u, n))
+        return belief
+    return Belief(x, y, th, v, **_spread_formulas(u, n))
+
+
+def _spread_formulas(u: Any, n: int) -> dict[str, Any]:
+    """Standard deviations and truncation bounds at step ``n`` (paper Sec. VI-C, Table I)."""
+    return {
+        "sigma_x": u.sigma0[0] + n * u.sigma_growth[0],
+        "sigma_y": u.sigma0[1] + n * u.sigma_growth[1],
+        "sigma_v": u.sigma0[2] + n * u.sigma_growth[2],
+        "half_x": u.box_half_width0[0] + n * u.box_growth[0],
+        "half_y": u.box_half_width0[1] + n * u.box_growth[1],
+        "v_lo": u.velocity_bounds0[0] - n * u.box_growth[2],
+        "v_hi": u.velocity_bounds0[1] + n * u.box_growth[2],
+    }
+
+
+@functools.lru_cache(maxsize=256)
+def _spreads(u: Uncertainty, n: int) -> dict[str, float]:
+    return _spread_formulas(u, n)
 
 
 def predict_array(scenario: Scenario, measurement: np.ndarray, steps: int | None = None) -> Belief:

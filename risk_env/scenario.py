@@ -17,35 +17,43 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-SeverityName = Literal["paper", "plastic", "probability"]
-SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability")
+from risk_env import checks
+from risk_env.observation import POSITION_BOUND, RATE_BOUND
+
+SeverityName = Literal["paper", "plastic", "probability", "injury"]
+SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability", "injury")
 UNCERTAINTY_PRESETS: tuple[str, ...] = ("low", "medium", "high")
 RISK_TOLERANCES: tuple[float, ...] = (0.0, 500.0, 1000.0, 1500.0, 2000.0, 2500.0)
 """The paper's risk tolerances epsilon [J] (Table II)."""
 
 
-def _finite(name: str, value: float) -> None:
-    if not math.isfinite(value):
+def _finite(name: str, value: Any) -> float:
+    """``value`` as a float if it is a finite real number, else an error naming ``name``."""
+    out = checks.real(name, value)
+    if not math.isfinite(out):
         raise ValueError(f"{name} must be finite, got {value!r}")
+    return out
 
 
-def _positive(name: str, value: float, strict: bool = True) -> None:
-    _finite(name, value)
-    if value < 0 or (strict and value == 0):
+def _positive(name: str, value: Any, strict: bool = True) -> float:
+    out = _finite(name, value)
+    if out < 0 or (strict and out == 0):
         bound = "> 0" if strict else ">= 0"
         raise ValueError(f"{name} must be {bound}, got {value!r}")
+    return out
 
 
 def _triple(name: str, value: Any, length: int = 3) -> tuple[float, ...]:
-    try:
-        out = tuple(float(v) for v in value)
-    except TypeError:
-        raise TypeError(f"{name} must be a sequence of {length} numbers, got {value!r}") from None
-    if len(out) != length:
-        raise ValueError(f"{name} must have {length} entries, got {len(out)}: {value!r}")
+    out = checks.reals(name, value, length)
     for i, v in enumerate(out):
         _finite(f"{name}[{i}]", v)
     return out
+
+
+def _set_numbers(owner: Any, prefix: str, names: tuple[str, ...]) -> None:
+    """Replace each field in ``names`` of the frozen ``owner`` by its value as a finite float."""
+    for name in names:
+        object.__setattr__(owner, name, _finite(f"{prefix}{name}", getattr(owner, name)))
 
 
 @dataclass(frozen=True)
@@ -60,8 +68,7 @@ class Pose:
     """Heading [rad], counter-clockwise from the c1 axis."""
 
     def __post_init__(self) -> None:
-        for name in ("x", "y", "theta"):
-            _finite(f"Pose.{name}", getattr(self, name))
+        _set_numbers(self, "Pose.", ("x", "y", "theta"))
 
     @classmethod
     def of(cls, value: Pose | tuple[float, float, float] | Any, name: str = "pose") -> Pose:
@@ -72,6 +79,9 @@ class Pose:
 
     def as_tuple(self) -> tuple[float, float, float]:
         return (self.x, self.y, self.theta)
+
+
+_EGO_NUMBERS = ("radius", "mass", "v_ref", "v_min", "v_max", "omega_max", "accel_max", "omega_rate_max")
 
 
 @dataclass(frozen=True)
@@ -105,6 +115,7 @@ class Ego:
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", Pose.of(self.start, "ego.start"))
         object.__setattr__(self, "initial_input", _triple("ego.initial_input", self.initial_input, 2))
+        _set_numbers(self, "ego.", _EGO_NUMBERS)
         _positive("ego.radius", self.radius)
         _positive("ego.mass", self.mass)
         _positive("ego.v_ref", self.v_ref, strict=False)
@@ -141,8 +152,7 @@ class CrossingObject:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", Pose.of(self.start, "object.start"))
-        _finite("object.speed", self.speed)
-        _finite("object.turn_rate", self.turn_rate)
+        _set_numbers(self, "object.", ("speed", "turn_rate", "radius", "mass"))
         _positive("object.radius", self.radius)
         _positive("object.mass", self.mass)
 
@@ -189,8 +199,7 @@ class Uncertainty:
     def preset(cls, name: str) -> Uncertainty:
         """The paper's Table I: ``"low"``, ``"medium"`` or ``"high"``."""
         table = {"low": (0.1, 1.0), "medium": (0.8, 2.0), "high": (1.5, 3.0)}
-        if name not in table:
-            raise ValueError(f"unknown uncertainty preset {name!r}; expected one of {UNCERTAINTY_PRESETS}")
+        checks.text("uncertainty preset", name, UNCERTAINTY_PRESETS)
         q, delta = table[name]
         return cls(sigma_growth=(q, q, q), box_growth=(delta, delta, delta))
 
@@ -212,8 +221,7 @@ class ReferencePath:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "goal", Pose.of(self.goal, "path.goal"))
-        _finite("path.curvature", self.curvature)
-        _finite("path.lambda_start", self.lambda_start)
+        _set_numbers(self, "path.", ("curvature", "lambda_start"))
         if self.lambda_start >= 0:
             raise ValueError(f"path.lambda_start must be < 0 (goal at 0), got {self.lambda_start}")
         if abs(self.curvature * self.lambda_start) >= math.pi:
@@ -249,7 +257,15 @@ class Scenario:
     """epsilon: the bound on the risk [units of the severity: J for the paper's]."""
     severity: SeverityName = "paper"
     """Severity model: ``"paper"`` (differential kinetic energy), ``"plastic"`` (energy lost in a
-    perfectly plastic impact, with velocity vectors) or ``"probability"`` (s = 1)."""
+    perfectly plastic impact, with velocity vectors), ``"probability"`` (s = 1) or ``"injury"``
+    (expected number of seriously injured people, from each party's delta-v)."""
+    injury_beta0: float = -4.591
+    """Intercept beta0 [-] of the ``"injury"`` severity's logistic MAIS3+ injury probability
+    ``1 / (1 + exp(-(beta0 + beta1 delta_v)))``: the model without impact angle of Geisslinger et
+    al., "An ethical trajectory planning algorithm for autonomous vehicles", Nature Machine
+    Intelligence 5, 2023."""
+    injury_beta1: float = 0.185
+    """Slope beta1 [s/m] of the same logistic in the delta-v [m/s] (same source); > 0."""
     max_steps: int = 80
     """Episode step limit K [steps]."""
     mc_samples: int = 500
@@ -264,22 +280,23 @@ class Scenario:
             ("uncertainty", Uncertainty),
             ("path", ReferencePath),
         ):
-            if not isinstance(getattr(self, name), cls):
-                raise TypeError(f"scenario.{name} must be a {cls.__name__}")
-        _positive("dt", self.dt)
-        for name in ("horizon", "max_steps", "mc_samples", "grid_points"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-        if self.grid_points < 2:
-            raise ValueError(f"grid_points must be >= 2, got {self.grid_points}")
+            if not isinstance(value, cls):
+                raise TypeError(f"scenario.{name} must be a {cls.__name__}, got {checks.describe(value)}")
+        object.__setattr__(self, "dt", _positive("dt", self.dt))
+        for name, minimum in (("horizon", 1), ("max_steps", 1), ("mc_samples", 1), ("grid_points", 2)):
+            object.__setattr__(self, name, checks.integer(name, getattr(self, name), minimum))
         weights = _triple("cost_weights", self.cost_weights, 4)
         for i, w in enumerate(weights):
             _positive(f"cost_weights[{i}]", w)
         object.__setattr__(self, "cost_weights", weights)
-        _positive("risk_tolerance", self.risk_tolerance, strict=False)
-        if self.severity not in SEVERITY_NAMES:
-            raise ValueError(f"unknown severity {self.severity!r}; expected one of {SEVERITY_NAMES}")
+        object.__setattr__(
+            self, "risk_tolerance", _positive("risk_tolerance", self.risk_tolerance, strict=False)
+        )
+        checks.text("severity", self.severity, SEVERITY_NAMES)
+        object.__setattr__(self, "injury_beta0", _finite("injury_beta0", self.injury_beta0))
+        # harm grows with delta-v
+        object.__setattr__(self, "injury_beta1", _positive("injury_beta1", self.injury_beta1))
         v_lo, v_hi = self.uncertainty.velocity_bounds0
         if not v_lo <= self.object.speed <= v_hi:
             raise ValueError(
@@ -292,6 +309,84 @@ class Scenario:
                 f"path.curvature {self.path.curvature} needs a turn rate above ego.omega_max at"
                 " v_ref: the path is not followable"
             )
+        self._check_observable()
+
+    def observation_reach(self) -> dict[str, tuple[float, float, str, str]]:
+        """The largest magnitude each part of an observation can take within ``max_steps`` steps,
+        with the bound of the observation Box, the unit and the fields that set it:
+        ``{part: (reach, bound, unit, fields)}``.
+
+        Worst cases, for either object motion: the ego moves at most ``max(|v_min|, |v_max|) dt``
+        per step; the object at most ``V dt`` plus its one-step truncation half width per axis,
+        with V its speed or, sampled, the edge of its one-step speed interval; the closest path
+        point of a point at distance D from the goal lies within arc length pi D of it (its chord
+        is at most 2 D), so the arc length and the position error are at most pi D. Actions may
+        exceed the limits by :func:`risk_env.checks.slack`.
+        """
+        ego, obj, u, path = self.ego, self.object, self.uncertainty, self.path
+        span = self.max_steps * self.dt
+        # the env accepts actions beyond the limits by checks.slack (float32 rounding)
+        v_lo, v_hi = ego.v_min - checks.slack(ego.v_min), ego.v_max + checks.slack(ego.v_max)
+        ego_speed = max(abs(v_lo), abs(v_hi))
+        ego_reach = span * ego_speed
+        o_lo, o_hi = u.velocity_bounds0
+        object_speed = max(abs(obj.speed), abs(o_lo - u.box_growth[2]), abs(o_hi + u.box_growth[2]))
+        half = max(u.box_half_width0[0] + u.box_growth[0], u.box_half_width0[1] + u.box_growth[1])
+        start, goal = ego.start, path.goal
+        to_goal = math.hypot(start.x - goal.x, start.y - goal.y) + ego_reach
+        o = obj.start
+        moves = "max_steps, dt"
+        return {
+            "ego position": (
+                max(abs(start.x), abs(start.y)) + ego_reach,
+                POSITION_BOUND,
+                "m",
+                f"ego.start, ego.v_min, ego.v_max, {moves}",
+            ),
+            "arc length and path error": (
+                math.pi * to_goal,
+                POSITION_BOUND,
+                "m",
+                f"ego.start, path.goal, ego.v_min, ego.v_max, {moves}",
+            ),
+            "object position": (
+                max(abs(o.x), abs(o.y)) + self.max_steps * (object_speed * self.dt + half),
+                POSITION_BOUND,
+                "m",
+                "object.start, object.speed, uncertainty.velocity_bounds0, uncertainty.box_growth,"
+                f" uncertainty.box_half_width0, {moves}",
+            ),
+            "ego speed": (ego_speed, RATE_BOUND, "m/s", "ego.v_min, ego.v_max"),
+            "ego turn rate": (
+                ego.omega_max + checks.slack(ego.omega_max),
+                RATE_BOUND,
+                "rad/s",
+                "ego.omega_max",
+            ),
+            "speed error": (
+                max(v_hi - ego.v_ref, ego.v_ref - v_lo),
+                RATE_BOUND,
+                "m/s",
+                "ego.v_ref, ego.v_min, ego.v_max",
+            ),
+            "object speed": (
+                object_speed,
+                RATE_BOUND,
+                "m/s",
+                "object.speed, uncertainty.velocity_bounds0, uncertainty.box_growth[2]",
+            ),
+            "object turn rate": (abs(obj.turn_rate), RATE_BOUND, "rad/s", "object.turn_rate"),
+        }
+
+    def _check_observable(self) -> None:
+        """Raise when an observation could leave the observation Box (see :meth:`observation_reach`)."""
+        for part, (reach, bound, unit, names) in self.observation_reach().items():
+            if not reach <= bound:
+                raise ValueError(
+                    f"the observation's {part} can reach {reach:.6g} {unit} in an episode of"
+                    f" max_steps = {self.max_steps}, beyond the observation space's bound {bound:g}"
+                    f" {unit}; change {names} (see risk_env.observation)"
+                )
 
     @property
     def collision_distance(self) -> float:
@@ -355,6 +450,8 @@ OVERRIDES: Mapping[str, tuple[str | None, str]] = {
     "cost_weights": (None, "cost_weights"),
     "risk_tolerance": (None, "risk_tolerance"),
     "severity": (None, "severity"),
+    "injury_beta0": (None, "injury_beta0"),
+    "injury_beta1": (None, "injury_beta1"),
     "max_steps": (None, "max_steps"),
     "mc_samples": (None, "mc_samples"),
     "grid_points": (None, "grid_points"),

@@ -5,9 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import special
 
-from risk_env.ops import Ops
+from risk_env.ops import NUMPY, Ops
 
 SIGMA_FLOOR = 1e-9
 """Standard deviations below this [units of the variable] are treated as a point mass."""
@@ -30,24 +29,21 @@ def sample(
     return transform(rng.random(shape), mean, sigma, lo, hi)
 
 
-def transform(
-    u: np.ndarray, mean: np.ndarray, sigma: np.ndarray, lo: np.ndarray, hi: np.ndarray
-) -> np.ndarray:
+def transform(u: Any, mean: Any, sigma: Any, lo: Any, hi: Any, ops: Ops = NUMPY) -> Any:
     """The inverse-CDF map of :func:`sample`: uniforms ``u`` on [0, 1) to truncated-normal draws
-    (shape of ``u`` broadcast with the parameters)."""
-    mean, sigma, lo, hi = np.broadcast_arrays(*(np.asarray(a, float) for a in (mean, sigma, lo, hi)))
+    (numpy: the shape of ``u`` broadcast with the parameters; or Python floats)."""
     degenerate = (sigma <= SIGMA_FLOOR) | (hi <= lo)
-    s = np.where(degenerate, 1.0, sigma)
+    s = ops.where(degenerate, 1.0, sigma)
     a = (lo - mean) / s
     b = (hi - mean) / s
     flip = a > 0  # both bounds above the mean: sample the mirrored lower tail instead
-    a2 = np.where(flip, -b, a)
-    b2 = np.where(flip, -a, b)
-    pa, pb = special.ndtr(a2), special.ndtr(b2)
-    z = special.ndtri(pa + u * (pb - pa))
-    z = np.where(flip, -z, z)
-    draws = np.clip(mean + s * z, lo, hi)
-    return np.where(degenerate, np.clip(mean, lo, hi), draws)
+    a2 = ops.where(flip, -b, a)
+    b2 = ops.where(flip, -a, b)
+    pa, pb = ops.norm_cdf(a2), ops.norm_cdf(b2)
+    z = ops.norm_ppf(pa + u * (pb - pa))
+    z = ops.where(flip, -z, z)
+    draws = ops.clip(mean + s * z, lo, hi)
+    return ops.where(degenerate, ops.clip(mean, lo, hi), draws)
 
 
 def partial_moments(

@@ -139,3 +139,68 @@ def test_full_table2_reproduces_the_papers_trends(tmp_path):
     verdicts = {claim: ok for claim, ok, _ in table2.check_claims(rows)}
     assert verdicts["RMPC (worst_case) does not depend on epsilon"]
     assert verdicts["RMPC (worst_case) d_min grows with uncertainty"]
+
+
+def test_sampled_takes_tolerances_in_each_severitys_unit():
+    parse = sampled.parse_tolerances
+    assert parse(["0,1000"], ["paper", "plastic"]) == {"paper": [0.0, 1000.0], "plastic": [0.0, 1000.0]}
+    got = parse(["0,2500", "probability=0,0.01", "injury=0.005"], ["paper", "probability", "injury"])
+    assert got == {"paper": [0.0, 2500.0], "probability": [0.0, 0.01], "injury": [0.005]}  # not rescaled
+    for groups, severities, message in (
+        (
+            ["0,1000"],
+            ["paper", "probability"],
+            "1000 exceeds 1, the largest per-step risk of the 'probability'",
+        ),
+        (["injury=3"], ["injury"], "3 exceeds 2, .* 'injury' severity \\[injuries\\]"),
+        (["-1"], ["paper"], "-1.0 must be finite and >= 0 \\[J\\]"),
+        (["nan"], ["plastic"], "nan must be finite"),
+        (["a,b"], ["paper"], "expected numbers"),
+        (["probability=0.1"], ["paper"], "names severity 'probability', not one of --severities"),
+        (["injury=0.001"], ["injury", "paper"], "no tolerances for severity 'paper'"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            parse(groups, severities)
+
+
+def test_sampled_cli_rejects_a_tolerance_in_another_unit(capsys):
+    with pytest.raises(SystemExit):
+        sampled.parse_args(["--severities", "probability", "--tolerances", "0,1000"])
+    assert "exceeds 1" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        sampled.parse_args(["--severities", "energy"])
+    assert "unknown severity" in capsys.readouterr().err
+    args = sampled.parse_args(["--severities", "injury", "--tolerances", "injury=0,0.005"])
+    assert args.tolerances == {"injury": [0.0, 0.005]}
+
+
+def test_sampled_rows_carry_the_unit_and_the_per_episode_columns(tmp_path):
+    argv = ["--agents", "smpc:exact", "--severities", "injury", "--uncertainty", "high"]
+    argv += ["--tolerances", "0.005", "--episodes", "2", "--out", str(tmp_path), "--workers", "1"]
+    (row,) = sampled.main(argv)
+    assert row["severity"] == "injury" and row["unit"] == "injuries" and row["epsilon"] == 0.005
+    assert 0.0 < row["episode_risk_mean"] <= row["episode_risk_max"]
+    assert row["risk_mean"] <= row["episode_risk_mean"]  # an episode has at least one step
+    assert row["harm_per_episode"] >= 0.0
+    assert "0.005 injuries" in (tmp_path / "sampled.md").read_text()
+
+
+def test_table2_takes_the_injury_severity_in_its_unit(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        table2.parse_args(["--severity", "injury"])  # the paper's default tolerances are in J
+    assert "500 exceeds 2" in capsys.readouterr().err
+    argv = [
+        "--methods",
+        "smpc:exact",
+        "--uncertainty",
+        "low",
+        "--severity",
+        "injury",
+        "--tolerances",
+        "0.005",
+    ]
+    (row,) = table2.main(argv + ["--out", str(tmp_path), "--workers", "1", "--no-figures"])
+    assert row["severity"] == "injury" and row["epsilon"] == 0.005 and not row["collided"]
+    assert 0.0 <= row["max_risk"] <= 0.005 * (1 + 1e-6)
+    assert math.isnan(row["paper_e_acc"])  # the paper's figures belong to its severity
+    assert "injuries" in (tmp_path / "table2.md").read_text()

@@ -193,6 +193,7 @@ def test_step_before_reset_and_reset_options():
 _INFO_TYPES = {
     "risk": float,
     "cost": float,
+    "episode_risk": float,
     "risk_violation": bool,
     "collision": bool,
     "distance": float,
@@ -396,3 +397,19 @@ def test_truncation_at_max_steps(short_scenario):
     assert env.steps == short_scenario.max_steps
     env.reset()
     assert env.steps == 0
+
+
+def test_episode_risk_sums_the_risk_since_reset():
+    """Safety-Gymnasium's per-episode cost: the running sum of ``info["risk"]``, zeroed by reset."""
+    env = near_object_env(uncertainty="high", object_motion="sampled", max_steps=6)
+    rng = np.random.default_rng(3)
+    for seed in (0, 1):
+        _, info = env.reset(seed=seed)
+        assert info["episode_risk"] == 0.0
+        total, done = 0.0, False
+        while not done:
+            _, _, terminated, truncated, info = env.step(act(rng.uniform(3.0, 5.0), 0.0))
+            total += info["risk"]
+            assert info["episode_risk"] == total
+            done = terminated or truncated
+        assert total > 0.0  # the episodes pass the object

@@ -16,6 +16,7 @@ from risk_env.exact_kernel import (
 )
 from risk_env.ops import MATH, NUMPY
 from risk_env.risk import GEOMETRY_FLOOR, disc_probability, signed_box_distance
+from risk_env.scenario import SEVERITY_NAMES
 
 P_TOL = 1e-12
 """Absolute tolerance on P (in [0, 1]) between the kernels and the generic form."""
@@ -113,7 +114,7 @@ def test_phi_table_matches_ndtr():
     assert np.abs(got - special.ndtr(z)).max() <= 7e-16
 
 
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_math_face_severity_equals_numpy(severity):
     s = Scenario.preset("high", severity=severity)
     est = make_estimator("exact", s)
@@ -128,7 +129,7 @@ def test_math_face_severity_equals_numpy(severity):
             assert got == pytest.approx(ref, rel=1e-13, abs=1e-10)
 
 
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_exact_risk_every_path_equals_generic_form(severity):
     """One state against a scalar belief (Python floats), a batch against one belief, a batch
     against per-step beliefs, mixed near and far: all equal the generic form's R."""

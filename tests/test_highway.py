@@ -65,7 +65,10 @@ def test_wrapper_risk_equals_riskcrossing_risk(estimator):
     hw = RiskCostWrapper(highway("highway-fast-v0", **KINEMATIC), uncertainty="medium", estimator=estimator)
     assert hw.scenario.dt == 1.0  # highway-fast-v0: 5 frames at 5 Hz
     ego0, obj0, v_ego, v_obj = (200.0, 0.0, 0.0), (208.0, -10.0, math.pi / 2), 4.0, 3.0
-    sc = hw.scenario.replace(ego_start=ego0, object_start=obj0, object_speed=v_obj, object_turn_rate=0.0)
+    # the goal lies ahead of the ego, so that RiskCrossing-v0's episode does not end at once
+    sc = hw.scenario.replace(
+        ego_start=ego0, object_start=obj0, object_speed=v_obj, object_turn_rate=0.0, goal=(400.0, 0.0, 0.0)
+    )
     hw = RiskCostWrapper(hw.env, scenario=sc, estimator=estimator)
     ours = gym.make(ENV_ID, scenario=sc, risk_estimator=estimator)
     ours.reset(seed=0)

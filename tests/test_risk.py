@@ -6,8 +6,10 @@ import pytest
 from scipy import integrate, stats
 
 from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
-from risk_env.ops import NUMPY
+from risk_env.ops import CASADI, NUMPY
+from risk_env.quadrature import SOLVER_SHORTFALL, SOLVER_SIGMA_BREAKS, SOLVER_SUPPORT
 from risk_env.risk import WorstCaseRisk, disc_probability, signed_box_distance
+from risk_env.scenario import SEVERITY_NAMES
 
 MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
 
@@ -90,7 +92,7 @@ def test_expected_severity_closed_form(severity, v_e):
         ("medium", 3, (20.0, 0.0, 0.0, 4.0), "far away"),
     ],
 )
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_exact_risk_within_monte_carlo_confidence_interval(preset, n, ego, label, severity):
     s, b = belief(preset, n, severity)
     exact = float(make_estimator("exact", s).risk(np.array(ego), b))
@@ -107,7 +109,7 @@ def test_exact_risk_within_monte_carlo_confidence_interval(preset, n, ego, label
         assert abs(exact - estimate) <= 4.5 * stderr + 1e-9 * abs(exact), (label, exact, estimate, stderr)
 
 
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_worst_case_bounds_exact_and_grid_under_approximates(severity):
     rng = np.random.default_rng(5)
     s, b = belief("medium", 3, severity)
@@ -167,7 +169,7 @@ def test_signed_box_distance():
 
 
 @pytest.mark.parametrize("name", [n for n in ESTIMATOR_NAMES if n != "monte_carlo"])
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_casadi_and_numpy_forms_agree(name, severity):
     s = Scenario.preset("high", severity=severity)
     beliefs = predict_array(s, MEASUREMENT)
@@ -205,7 +207,7 @@ def test_smoothed_monte_carlo_tends_to_the_hard_indicator():
 
 
 @pytest.mark.parametrize("preset", ["low", "medium", "high"])
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_smoothed_monte_carlo_within_its_stated_bound_of_the_hard_estimator(preset, severity):
     """The solver's form against the paper's (numpy, hard indicator) on the same draws: within
     ``smoothing_bound`` everywhere, and the bound is small where the draws are dense."""
@@ -263,7 +265,7 @@ def test_smoothed_monte_carlo_bias_in_expectation_is_small():
         assert abs(smooth - reference) <= noise + 0.01 * max(reference, 100.0) + est.severity_width
 
 
-@pytest.mark.parametrize("severity", ["paper", "plastic", "probability"])
+@pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_smooth_severity_lies_within_its_width_above_the_severity(severity):
     from risk_env.severity import make_severity
 
@@ -324,3 +326,115 @@ def test_exact_risk_skips_only_states_whose_disc_misses_the_box():
     scale = np.asarray(est.severity.expected(steps[:, 3], steps[:, 2], beliefs, NUMPY))
     assert np.all(np.abs(est.risk(steps, beliefs) - full_steps) <= 1e-12 * scale)
     assert float(est.risk(np.array([60.0, 60.0, 0.0, 4.0]), beliefs[1])) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("case", "kink"),
+    [
+        ((0.3, 0.2, 0.1, 0.1, 1.0, 1.0), False),  # low preset, n = 1, object inside the disc
+        ((2.9, 0.4, 0.3, 0.3, 3.0, 3.0), False),  # low, n = 3: the disc edge through the object
+        ((2.0, -2.9, 0.8, 0.8, 2.0, 2.0), False),  # medium, truncation active
+        ((4.0, -0.2, 0.42, 0.45, 4.2, 4.5), False),
+        ((-1.2, 3.3, 1.5, 1.7, 3.0, 3.4), False),  # anisotropic, the box cuts the disc
+        ((-4.0, 3.9, 1.5, 1.5, 3.0, 3.0), True),  # high, n = 1: the disc over the box's corner
+        ((9.0, 6.0, 4.5, 4.5, 9.0, 9.0), True),  # high, the disc on the box's corner
+    ],
+)
+def test_disc_probability_derivatives_are_the_integrals(case, kink):
+    """The CasADi face's derivatives (edges held, Leibniz nodes at the range's ends) against
+    finite differences of the adaptive quadrature. The gradient is P's. So is the Hessian, but
+    for the motion of the kinks where a chord's end crosses the box's inner edge (``kink``):
+    a rank-one term per kink, left out (it changes the solver's steps, not its solution)."""
+    dx, dy, sx, sy, hx, hy = case
+    d = ca.SX.sym("d", 2)
+    b = Belief(0.0, 0.0, 0.0, 3.0, sx, sy, 1.0, hx, hy, -5.0, 5.0)
+    p = disc_probability(d[0], d[1], 3.0, b, CASADI)
+    hessian, gradient = ca.hessian(p, d)
+    value, grad, hess = (np.asarray(a) for a in ca.Function("f", [d], [p, gradient, hessian])([dx, dy]))
+    at, e = np.array([dx, dy]), np.eye(2)
+
+    def ref(x: np.ndarray) -> float:
+        return reference_probability(x[0], x[1], 3.0, sx, sy, hx, hy)
+
+    h = 1e-4
+    fd_grad = np.array([(ref(at + h * e[i]) - ref(at - h * e[i])) / (2 * h) for i in range(2)])
+    h = 2e-3
+    fd_hess = np.array(
+        [
+            [
+                (
+                    ref(at + h * (e[i] + e[j]))
+                    - ref(at + h * (e[i] - e[j]))
+                    - ref(at - h * (e[i] - e[j]))
+                    + ref(at - h * (e[i] + e[j]))
+                )
+                / (4 * h * h)
+                for j in range(2)
+            ]
+            for i in range(2)
+        ]
+    )
+    assert value.item() == pytest.approx(ref(at), abs=5e-5)
+    scale = max(np.max(np.abs(fd_grad)), 1e-3)
+    np.testing.assert_allclose(grad.ravel(), fd_grad, atol=2e-3 * scale + 1e-6)
+    scale = max(np.max(np.abs(fd_hess)), 1e-3)
+    missing = hess - fd_hess
+    if not kink:
+        np.testing.assert_allclose(hess, fd_hess, atol=1e-2 * scale)
+    else:  # what is left out has rank one
+        assert abs(np.linalg.det(missing)) <= 1e-2 * np.sum(missing**2) + (1e-2 * scale) ** 2
+
+
+def test_stop_derivative_holds_the_value_and_drops_the_derivative():
+    x = ca.SX.sym("x")
+    held = CASADI.stop_derivative(ca.sin(x))
+    picked = CASADI.select(x > 0, x * x, 3 * x)
+    f = ca.Function("f", [x], [held, ca.jacobian(held, x), picked, ca.jacobian(picked, x)])
+    for value in (-1.3, -1e-9, 0.0, 0.7, 1.5707963267948966):
+        h, dh, p, dp = (float(a) for a in f(value))
+        assert abs(h - np.sin(value)) <= 2.0**-51 and dh == 0.0
+        assert p == (value * value if value > 0 else 3 * value)
+        assert dp == (2 * value if value > 0 else 3.0)
+    assert NUMPY.stop_derivative(0.3) == 0.3
+    assert NUMPY.select(np.array([True, False]), 1.0, 2.0).tolist() == [1.0, 2.0]
+
+
+def test_solver_rule_falls_short_of_the_envs_by_at_most_its_bound():
+    """The MPC's rule (cut at +-5 sigma) against the env's (+-7): not above it (to 1e-9), below it
+    by at most SOLVER_SHORTFALL, on random geometries (boxes from 0.05 to 12 sigma, so the cut binds on
+    many) and along the paper's predictions; the margin it adds back makes ExactRisk's solver R
+    at or above the env's R."""
+    rng = np.random.default_rng(17)
+    n = 20000
+    s = np.exp(rng.uniform(np.log(0.02), np.log(6.0), (n, 2)))
+    s[::3, 1] = s[::3, 0]
+    h = s * np.exp(rng.uniform(np.log(0.05), np.log(12.0), (n, 2)))
+    d = rng.uniform(-1, 1, (n, 2)) * (h + 3.0)
+    b = Belief(0.0, 0.0, 0.0, 3.0, s[:, 0], s[:, 1], 1.0, h[:, 0], h[:, 1], -5.0, 5.0)
+    env_rule = disc_probability(d[:, 0], d[:, 1], 3.0, b)
+    solver_rule = disc_probability(
+        d[:, 0], d[:, 1], 3.0, b, sigma_breaks=SOLVER_SIGMA_BREAKS, support=SOLVER_SUPPORT
+    )
+    shortfall = env_rule - solver_rule
+    # (-1e-9: the env rule's own quadrature error on its tail segments, where P is ~1e-10)
+    assert np.all(shortfall >= -1e-9) and np.all(shortfall <= SOLVER_SHORTFALL + 1e-12)
+    assert np.max(shortfall) > 0.1 * SOLVER_SHORTFALL  # the cut bound somewhere
+    for preset in ("low", "medium", "high"):
+        sc = Scenario.preset(preset)
+        est = make_estimator("exact", sc)
+        e, p = ca.SX.sym("e", 4), ca.SX.sym("p", Belief.SIZE)
+        f = ca.Function("f", [e, p], [est.solver_risk(e, Belief.from_array(p))])
+        egos = np.column_stack(
+            [rng.normal(5, 6, 400), rng.normal(-2, 6, 400), rng.uniform(-3, 3, 400), rng.uniform(-4, 8, 400)]
+        )
+        for belief_n in predict_array(sc, MEASUREMENT)[1:]:
+            params = np.tile(belief_n.as_array()[:, None], (1, len(egos)))
+            solver = np.array(f.map(len(egos))(egos.T, params)).ravel()
+            env = est.risk(egos, belief_n)
+            scale = np.asarray(est.severity.expected(egos[:, 3], egos[:, 2], belief_n, NUMPY))
+            assert np.all(solver >= env - 1e-9)
+            assert np.all(solver <= env + (SOLVER_SHORTFALL + 1e-9) * scale)
+            off = signed_box_distance(
+                egos[:, 0] - belief_n.x, egos[:, 1] - belief_n.y, belief_n.half_x, belief_n.half_y
+            )
+            assert np.all(solver[off >= 3.0] == 0.0) and np.any(off >= 3.0)  # off the box: exactly 0

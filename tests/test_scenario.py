@@ -1,9 +1,11 @@
 import dataclasses
 import math
+import re
 
+import numpy as np
 import pytest
 
-from risk_env.scenario import OVERRIDES, RISK_TOLERANCES, Scenario, Uncertainty
+from risk_env.scenario import OVERRIDES, RISK_TOLERANCES, Pose, Scenario, Uncertainty
 
 
 def test_paper_numbers():
@@ -82,3 +84,78 @@ def test_unknown_names_raise_with_suggestion():
         Scenario.preset("extreme")
     with pytest.raises(ValueError, match="unknown uncertainty preset"):
         Uncertainty.preset("Low")
+
+
+# ---------------------------------------------------------------- types, field by field
+_SEQUENCES = {"ego_start": 3, "object_start": 3, "goal": 3, "initial_input": 2, "cost_weights": 4}
+_SEQUENCES.update({name: 3 for name in ("sigma_growth", "box_growth", "sigma0")})
+_SEQUENCES.update({"box_half_width0": 2, "velocity_bounds0": 2})
+_INTEGERS = ("horizon", "max_steps", "mc_samples", "grid_points")
+_TEXTS = ("severity",)
+
+
+def _field_name(name: str) -> str:
+    """How errors name an override: ``ego.mass`` for ``ego_mass``, ``dt`` for ``dt``."""
+    part, attr = OVERRIDES[name]
+    return attr if part is None else f"{part}.{attr}"
+
+
+_FIELD_NAMES = {name: _field_name(name) for name in OVERRIDES}
+
+
+def _wrong_values(name: str) -> list:
+    common = ["1", None, 1j, object()]
+    if name in _SEQUENCES:
+        n = _SEQUENCES[name]
+        return [*common, 1.0, "abc", ["1"] * n, [True] * n, [None] * n, [1j] * n]
+    if name in _TEXTS:
+        return [None, 1j, object(), ["paper"], 1]
+    return [*common, True, np.True_, [1.0], np.array([1.0])]
+
+
+@pytest.mark.parametrize(
+    ("name", "value"), [(name, value) for name in OVERRIDES for value in _wrong_values(name)]
+)
+def test_every_field_rejects_wrong_types_by_its_own_name(name, value):
+    with pytest.raises(TypeError) as error:
+        Scenario.preset("low", **{name: value})
+    message = str(error.value)
+    assert re.match(rf"{re.escape(_FIELD_NAMES[name])}(\[\d\])? ", message), message
+    assert "got " in message
+
+
+def test_integer_fields_take_integral_types_only():
+    for name in _INTEGERS:
+        s = Scenario.preset("low", **{name: np.int16(12)})
+        assert getattr(s, name) == 12 and type(getattr(s, name)) is int
+        for bad in (12.0, np.float64(12.0), True, "12"):
+            with pytest.raises(TypeError, match=f"{name} must be an integer"):
+                Scenario.preset("low", **{name: bad})
+
+
+def test_numbers_are_stored_as_python_floats():
+    s = Scenario.preset(
+        "low", ego_start=np.array([-10, 10, 0], dtype=np.int32), risk_tolerance=np.float32(0.5), dt=1
+    )
+    assert s.ego.start == Pose(-10.0, 10.0, 0.0)
+    assert type(s.ego.start.x) is float and type(s.risk_tolerance) is float and type(s.dt) is float
+    assert s.risk_tolerance == float(np.float32(0.5))
+    assert s == Scenario.preset("low", ego_start=(-10.0, 10.0, 0.0), risk_tolerance=0.5, dt=1.0)
+
+
+def test_nested_parts_must_have_their_types():
+    with pytest.raises(TypeError, match=r"scenario\.ego must be a Ego, got 'x' \(str\)"):
+        Scenario(ego="x")
+    with pytest.raises(TypeError, match=r"Pose\.theta must be a real number .*'0' \(str\)"):
+        Pose(0.0, 0.0, "0")
+
+
+def test_observation_reach_of_the_paper_scenario():
+    # ego: 80 steps of 0.5 s at |v| <= 8 m/s from (-10, 10); the object from (5, -5) at up to
+    # 5 + 1 m/s plus a 1 m box per step (low uncertainty)
+    reach = Scenario.preset("low").observation_reach()
+    assert reach["ego position"][0] == pytest.approx(10.0 + 320.0, rel=1e-5)
+    assert reach["object position"][0] == pytest.approx(5.0 + 80 * (6.0 * 0.5 + 1.0))
+    assert reach["object speed"][0] == 6.0
+    assert reach["ego turn rate"][0] == pytest.approx(0.8, rel=1e-5)
+    assert all(value <= bound for value, bound, _, _ in reach.values())

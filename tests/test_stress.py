@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import csv
 import math
 
@@ -84,6 +85,16 @@ def test_stress_benchmark_on_a_few_scenes(tmp_path, capsys):
     md = (tmp_path / "stress.md").read_text()
     assert "Command: `python -m benchmarks.stress --scenes 3 --agents rmpc,smpc0" in md
     assert "| rmpc | RMPC worst_case | 0 | 3 |" in md
+
+
+def test_every_flag_has_help_and_shows_its_default():
+    parser = stress.build_parser()
+    assert parser.prog == "python -m benchmarks.stress"
+    assert isinstance(parser.formatter_class(parser.prog), argparse.ArgumentDefaultsHelpFormatter)
+    for action in parser._actions:
+        if not isinstance(action, argparse._HelpAction):
+            assert action.help and "(default" in parser.formatter_class(parser.prog)._get_help_string(action)
+    assert parser.get_default("out").as_posix() == "results"
 
 
 def test_stress_cli_checks_its_arguments(capsys):

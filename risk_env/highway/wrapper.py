@@ -7,6 +7,7 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
+from risk_env import checks
 from risk_env.highway.common import highway_scenario, unwrapped_highway, vehicle_measurement
 from risk_env.prediction import Belief, predict
 from risk_env.risk import RiskEstimator, make_estimator
@@ -32,6 +33,11 @@ class RiskCostWrapper(gym.Wrapper):
     | ``risk``, ``cost`` | ``sum_j R_j`` (float; units of the severity, J for the paper's) |
     | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
     | ``risk_terms`` | ``{index of j in env.unwrapped.road.vehicles after the step: R_j}`` |
+
+    Actions are checked against the env's action space before highway-env sees them: a ``Box``
+    takes finite real numbers of its shape (highway-env clips their range itself), a ``Discrete``
+    an integer in range (not a bool, not a float); anything else raises ``ValueError`` or
+    ``TypeError`` naming the action.
 
     Vehicles that appeared during the step have no measurement before it and no term (one step
     later they do); road objects (obstacles) are not vehicles and have none. ``reset`` reports
@@ -73,8 +79,7 @@ class RiskCostWrapper(gym.Wrapper):
             )
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env.Scenario, got {type(scenario).__name__}")
-        if isinstance(vehicle_index, bool) or not isinstance(vehicle_index, int) or vehicle_index < 0:
-            raise ValueError(f"vehicle_index must be an integer >= 0, got {vehicle_index!r}")
+        vehicle_index = checks.integer("vehicle_index", vehicle_index, minimum=0)
         self.scenario = scenario
         self.estimator: RiskEstimator = make_estimator(estimator, scenario)
         self.vehicle_index = vehicle_index
@@ -109,7 +114,11 @@ class RiskCostWrapper(gym.Wrapper):
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Check ``action`` (:func:`risk_env.checks.space_action`; ``None`` is highway-env's "no
+        new action"), step the env and add the risk to ``info``."""
         self.ego  # noqa: B018  (raises a clear error when there is no controlled vehicle)
+        if action is not None:
+            checks.space_action(action, self.action_space)
         obs, reward, terminated, truncated, info = self.env.step(action)
         terms = self.risk_terms()
         risk = float(sum(terms.values()))

@@ -1,0 +1,88 @@
+"""The README as a newcomer meets it: short, two commands first, and every Python block runs alone."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+README = (ROOT / "README.md").read_text()
+BLOCKS = re.findall(r"^```(\w*)\n(.*?)^```", README, flags=re.DOTALL | re.MULTILINE)
+PYTHON_BLOCKS = [code for lang, code in BLOCKS if lang == "python"]
+OPTIONAL = {
+    "agents.ppo": "stable_baselines3",
+    "PPOAgent": "stable_baselines3",
+    "risk_env.highway": "highway_env",
+}
+"""What a block mentions -> the optional module it then needs (skipped when missing)."""
+
+
+def run_alone(code: str, cwd: Path, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """``code`` in a fresh interpreter, in an empty folder, headless, this checkout importable."""
+    for needle, module in OPTIONAL.items():
+        if needle in code and importlib.util.find_spec(module) is None:
+            pytest.skip(f"the block needs {module} (an optional extra)")
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        "SDL_VIDEODRIVER": "dummy",
+        "MPLBACKEND": "Agg",
+    }
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def test_readme_is_under_12_kb():
+    assert len(README.encode()) < 12_000, f"README.md is {len(README.encode())} bytes"
+
+
+def test_readme_starts_with_the_two_commands_each_in_its_own_block():
+    first, second = BLOCKS[0], BLOCKS[1]
+    assert first[0] == second[0] == "bash"
+    main_job, tests = first[1].strip(), second[1].strip()
+    assert "\n" not in main_job and "\n" not in tests, "each command is one line"
+    assert main_job.endswith("python -m benchmarks.table2")
+    assert tests.endswith("python -m pytest -q")
+    for command in (main_job, tests):
+        assert command.startswith('pip install "torch==') and "download.pytorch.org/whl/cpu" in command
+    assert 'pip install -e ".[rl]"' in main_job and 'pip install -e ".[dev]"' in tests
+    # nothing but the title and the pitch before them
+    assert README.index("```") > README.index("## Install and run")
+
+
+def test_readme_states_the_python_versions_and_the_cpu_index():
+    assert "Python 3.10 to 3.13" in README
+    assert "--index-url https://download.pytorch.org/whl/cpu" in README
+
+
+def test_readme_has_quick_starts_for_the_mpc_ppo_and_highway_env():
+    assert len(PYTHON_BLOCKS) == 3
+    assert "SMPC" in PYTHON_BLOCKS[0] and "PPOAgent" in PYTHON_BLOCKS[1]
+    assert "IntersectionAdapter" in PYTHON_BLOCKS[2]
+
+
+@pytest.mark.parametrize("index", range(len(PYTHON_BLOCKS)))
+def test_every_python_block_runs_alone(index, tmp_path):
+    result = run_alone(PYTHON_BLOCKS[index], tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert result.stdout.strip(), "each block prints what it found"
+
+
+def test_readme_links_resolve():
+    for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", README):
+        if not target.startswith(("http://", "https://")):
+            assert (ROOT / target).exists(), f"README links to a missing {target}"
+
+
+def test_readme_citation_is_the_docs_one():
+    bib = (ROOT / "docs" / "citation.bib").read_text().strip()
+    blocks = [code.strip() for lang, code in BLOCKS if lang == "bibtex"]
+    assert blocks == [bib]
+    assert "2304.12063" in bib and "Tolksdorf, Leon and Tejada, Arturo and van de Wouw, Nathan" in bib
