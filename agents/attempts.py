@@ -50,10 +50,12 @@ def solve(
     reserve: float,
     tally: Tally,
     keep_best: bool = False,
+    reserve_after: float | None = None,
 ) -> tuple[dict[str, np.ndarray] | None, int]:
     """``(outputs of the best converged call or None, calls made)``: one call of ``problem`` per
     guess (``args``: the nlpsol arguments but the initial point), while a rung fits the budget
-    left beyond ``reserve`` [s]; stops at the first success unless ``keep_best``."""
+    left beyond ``reserve`` [s] (``reserve_after`` once a call converged: the later levels will
+    not run); stops at the first success unless ``keep_best``."""
     best: dict[str, np.ndarray] | None = None
     calls = 0
     points = iter(guesses)
@@ -89,6 +91,8 @@ def solve(
         budget.capped |= not ok and rung > 0 and stopped
         if ok and not keep_best:
             break
+        if ok and reserve_after is not None:
+            reserve = reserve_after
     return best, calls
 
 

@@ -21,6 +21,8 @@ LONG_CALL = 20
 """Calls of at least this many iterations are also remembered apart: the calls that run into a
 rung's limit are long ones, and a failing call's iterations cost more (line searches,
 restoration) than a converging one's."""
+SKIP_DISCOUNT = 0.8
+"""Factor on the estimate after each call that did not fit (reset by the next measured call)."""
 END_SHARE = 0.1
 """Share of the cap no solver call may use: the step's own work after its last call, and the
 error of the calls' predicted times."""
@@ -76,45 +78,46 @@ class CallTimes:
     """The solver calls of one NLP variant: the rungs' limits and the measured wall time per
     iteration of recent calls, shared by every agent that uses the variant in this process."""
 
-    def __init__(self, limits: tuple[tuple[int, float | None], ...], prior: float) -> None:
+    def __init__(self, limits: tuple[tuple[int, float | None], ...], prior: float, failing: float) -> None:
         self.limits = limits
         """``(max_iter, max_wall_time [s] or None)`` of each rung, the largest first."""
         self.prior = prior
-        """Time per iteration [s] assumed before the first measured call."""
-        self._per_iteration: deque[float] = deque(maxlen=WINDOW)
-        self._long: deque[float] = deque(maxlen=WINDOW)
+        """Time per iteration [s] of a call on the scenario's start, measured at the build."""
+        self.failing = failing
+        """... and of a failing call (the object inside the boxes), measured at the build."""
+        self._all: deque[float] = deque([prior], maxlen=WINDOW)
+        self._long: deque[float] = deque([max(prior, failing)], maxlen=WINDOW)
+        self._discount = 1.0
 
     def record(self, iterations: int, seconds: float) -> None:
         """Remember a call of ``iterations`` iterations that took ``seconds``."""
         if iterations >= 1:
             per_iteration = max(seconds - CALL_OVERHEAD, 0.0) / iterations
-            self._per_iteration.append(per_iteration)
+            self._all.append(per_iteration)
             if iterations >= LONG_CALL:
                 self._long.append(per_iteration)
+            self._discount = 1.0
 
-    def per_iteration(self) -> float:
-        """The conservative time per iteration [s]: :data:`SAFETY` times the :data:`QUANTILE`
-        percentile of the recent calls', or of the recent long calls' if larger (the prior until
-        a call was measured)."""
-        if not self._per_iteration:
-            return self.prior
-        quantile = max(
-            float(np.percentile(np.fromiter(h, float), QUANTILE))
-            for h in (self._per_iteration, self._long)
-            if h
-        )
-        return SAFETY * quantile
+    def per_iteration(self, iterations: int = 1) -> float:
+        """The conservative time per iteration [s] of a call of up to ``iterations`` iterations:
+        :data:`SAFETY` times the :data:`QUANTILE` percentile of the recent calls' (of the recent
+        long calls' for a long one)."""
+        history = self._long if iterations >= LONG_CALL else self._all
+        return self._discount * SAFETY * float(np.percentile(np.fromiter(history, float), QUANTILE))
 
     def predict(self, rung: int) -> float:
         """Upper estimate [s] of a call at ``rung``."""
         iterations, wall = self.limits[rung]
         if wall is not None:
             return wall + IPOPT_OVERRUN
-        return CALL_OVERHEAD + iterations * self.per_iteration()
+        return CALL_OVERHEAD + iterations * self.per_iteration(iterations)
 
     def rung(self, available: float) -> int | None:
-        """The largest rung whose call fits in ``available`` seconds (None: none fits)."""
+        """The largest rung whose call fits in ``available`` seconds (None: none fits; then the
+        estimate is discounted by :data:`SKIP_DISCOUNT` until the next measured call, so that a
+        pessimistic estimate cannot keep every call out for good)."""
         for r in range(len(self.limits)):
             if self.predict(r) <= available:
                 return r
+        self._discount *= SKIP_DISCOUNT
         return None

@@ -68,13 +68,14 @@ class PathFollowingMPC:
     returning NaN; :attr:`last_solve` says which level acted, :attr:`failures` counts the steps
     where (b) or (c) did):
 
-    (a) the hard problem: warm-started from the shifted previous plan; if that call fails, cold
-        from the best initial-guess rollouts (up to ``cold_starts``). A success is IPOPT's
-        "Solve_Succeeded" or "Solved_To_Acceptable_Level", fatrop's success flag, with finite
-        numbers.
+    (a) the hard problem: warm-started from the shifted previous plan (an episode's first step:
+        from each of the best initial-guess rollouts, up to ``cold_starts``, keeping the plan of
+        least cost). A success is IPOPT's "Solve_Succeeded" or "Solved_To_Acceptable_Level",
+        fatrop's success flag, with finite numbers.
     (b) if none converges (infeasible, iteration or time limit, NaN, an exception): the same
         problem with its risk rows softened by L1-penalised slacks (the ``"*_soft"`` variants of
-        :mod:`agents.ocp`), from the shifted plan or the best rollout or manoeuvre. The penalty is
+        :mod:`agents.ocp`), from the shifted plan, then the best rollouts and manoeuvres (up to
+        ``cold_starts``; they replace the hard problem's cold retries). The penalty is
         exact: where the hard problem is feasible (and rho exceeds its risk rows' multipliers) the
         soft problem's solution is the hard one's, with zero slacks. So a soft plan whose slacks
         vanish (to :data:`FEASIBLE_SLACK`) solves the hard problem, and is level (a)
@@ -120,10 +121,11 @@ class PathFollowingMPC:
             risk over the severity's scale), so a converged plan stays a hair off the boundary where
             the worst-case risk's hard indicator jumps, and float32 observations cannot put the
             applied step on its wrong side.
-        cold_starts: how many initial-guess rollouts (best first) a step may try from cold, after
-            a failed warm start; the first step of an episode solves from each of them and keeps
-            the plan of least cost (the problem is not convex: going round the object on either
-            side, waiting or reversing are separate local optima).
+        cold_starts: how many initial-guess rollouts (best first) a level may try from cold: the
+            first step of an episode solves the hard problem from each of them and keeps the plan
+            of least cost (the problem is not convex: going round the object on either side,
+            waiting or reversing are separate local optima); the soft problem tries them after
+            the shifted plan.
         max_solve_time: the wall-time cap of one step [s] (None: 20 % of the sample time;
             ``math.inf``: no cap, one solver per NLP).
         soft_penalty: rho of the soft problem's penalty ``rho * sum_n s_n`` [cost per margin unit];

@@ -1,4 +1,4 @@
-"""Building the MPC's solver from the NLP of :mod:`agents.ocp`: options, compilation and caches.
+"""Building the MPC's solver from the NLP of :mod:`agents.ocp`: options, rungs, caches.
 
 Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
 Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
@@ -13,7 +13,14 @@ functions (dynamics, pose cost, risk row) called rather than inlined, its functi
 the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGenerator`, compiled by
 ``$CC`` (gcc) at ``-O{jit_opt}`` into a shared library in a private temporary directory and kept in
 ``jit_cache`` under a hash of the NLP, so later processes load it; nlpsol then runs from the
-library. Nothing is written to the working directory and the process never changes directory.
+library (:mod:`agents.compiled`). Nothing is written to the working directory and the process never
+changes directory.
+
+**Rungs** (:meth:`SolverSettings.rung_limits`): each NLP is built with a few solvers that differ
+only in their limits (fatrop: ``max_iter``, halved per rung; IPOPT: ``max_wall_time``, halved per
+rung), so that a call can be made to fit the time left in a step (:mod:`agents.budget`). The
+smallest rung is built first and run on the scenario's start: its time per iteration is the prior
+of the budget's estimate, and fatrop rungs that could never fit twice the step's cap are left out.
 
 **Caches**: built problems are kept per process (:func:`cached_problem`, keyed by everything that
 changes the NLP or the solver), compiled libraries on disk.
@@ -21,15 +28,8 @@ changes the NLP or the solver), compiled libraries on disk.
 
 from __future__ import annotations
 
-import atexit
-import functools
-import hashlib
 import math
 import os
-import shlex
-import shutil
-import subprocess
-import tempfile
 import time
 import warnings
 from collections import OrderedDict
@@ -41,32 +41,29 @@ import casadi as ca
 import numpy as np
 
 from agents.budget import CallTimes
-from agents.ocp import EARLY_WEIGHT, NU, NX, SOFT, STAGE_COSTS, Margin, assemble, stage_functions
+from agents.compiled import DEFAULT_JIT_CACHE, compiled_library, have_c_compiler
+from agents.ocp import (
+    EARLY_WEIGHT,
+    NU,
+    NX,
+    SOFT,
+    STAGE_COSTS,
+    Margin,
+    assemble,
+    stage_functions,
+    uncertainty_vector,
+    variable_bounds,
+)
+from risk_env.path import project
 from risk_env.scenario import Scenario
 
 SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
 IPOPT_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-DEFAULT_JIT_CACHE = os.environ.get(
-    "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
-)
-"""Where compiled solvers (shared libraries) are kept between processes."""
-_COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
-"""The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
 USEFUL_RUNG = 2.0
 """A fatrop rung is built when its iterations at the prior time per iteration take at most this
 many step caps (a larger one could never fit the time left in a step)."""
-ITERATION_EVALUATIONS = 3.0
-"""A solver iteration costs about this many evaluations of the NLP's derivatives (line search,
-restoration)."""
 _CACHE_SIZE = 48
 _SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
-
-
-def have_c_compiler() -> bool:
-    """Whether the C compiler for compiled solvers (``$CC``, e.g. ``"ccache gcc"``, or ``gcc``) can
-    be found."""
-    command = shlex.split(os.environ.get("CC", "gcc"))
-    return bool(command) and shutil.which(command[0]) is not None
 
 
 @dataclass(frozen=True)
@@ -293,17 +290,19 @@ def build_problem(
             derivatives.update({k: solver.get_function(v) for k, v in names.items()})
         return solver
 
-    # the smallest rung first: its derivative evaluations give the prior time per iteration, which
+    # the smallest rung first: its time per iteration on the scenario's start is the prior, which
     # leaves out the larger fatrop rungs that could never fit in the cap
     ladder = settings.rung_limits()
     smallest = make(len(ladder) - 1)
-    prior = iteration_time(smallest)
+    index = {tag: i for i, tag in enumerate(w_tags)}
+    x_index = np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)])
+    u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
+    prior, failing = iteration_times(smallest, scenario, x_index, u_index, lbg, ubg, risk_shape)
     cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
-    rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * prior <= cap]
+    rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
     solvers = [make(r) for r in rungs] + [smallest]
     limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
 
-    index = {tag: i for i, tag in enumerate(w_tags)}
     return Problem(
         variant=variant,
         solvers=tuple(solvers),
@@ -313,8 +312,8 @@ def build_problem(
         beliefs=belief_fn,
         lbg=np.array(lbg),
         ubg=np.array(ubg),
-        x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
-        u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
+        x_index=x_index,
+        u_index=u_index,
         risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
         slack_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int),
         slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
@@ -323,79 +322,57 @@ def build_problem(
         g_tags=tuple(g_tags),
         build_time=time.perf_counter() - t0,
         jit=jit,
-        times=CallTimes(limits, prior),
+        times=CallTimes(limits, prior, failing),
     )
 
 
-def iteration_time(solver: ca.Function, repeats: int = 3) -> float:
-    """A prior for the time of one solver iteration [s]: :data:`ITERATION_EVALUATIONS` times the
-    evaluations of the NLP's derivatives (the Lagrangian's Hessian, the constraint Jacobian, the
-    objective's gradient and the constraints) at a random point, the fastest of ``repeats``."""
-    rng = np.random.default_rng(0)
-    total = 0.0
-    for name in ("nlp_hess_l", "nlp_jac_g", "nlp_grad_f", "nlp_g"):
-        if not solver.has_function(name):
-            continue
-        f = solver.get_function(name)
-        args = [rng.random(f.size_in(i)) for i in range(f.n_in())]
-        best = math.inf
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            with np.errstate(all="ignore"):
-                f(*args)
-            best = min(best, time.perf_counter() - t0)
-        total += best
-    return ITERATION_EVALUATIONS * total
+def iteration_time(
+    solver: ca.Function,
+    scenario: Scenario,
+    x_index: np.ndarray,
+    u_index: np.ndarray,
+    lbg: list[float],
+    ubg: list[float],
+    risk_shape: tuple[int, int],
+    repeats: int = 2,
+) -> float:
+    """The time of one solver iteration [s] on the scenario's start (its object, epsilon and
+    uncertainty; zero risk data) from rest: the fastest of ``repeats`` calls (the first also pays
+    one-time set-up)."""
+    N, n_w = scenario.horizon, solver.size_in("x0")[0]
+    x, y, theta = scenario.ego.start.as_tuple()
+    x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
+    obj = scenario.object
+    p = np.concatenate(
+        [
+            [*obj.start.as_tuple(), obj.speed, obj.turn_rate, scenario.risk_tolerance],
+            uncertainty_vector(scenario),
+            np.zeros(N * risk_shape[0] * risk_shape[1]),
+        ]
+    )
+    lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0)
+    w0 = np.zeros(n_w)
+    w0[x_index] = x0
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        with np.errstate(all="ignore"):
+            solver(x0=w0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
+        iterations = int(solver.stats().get("iter_count", 0))
+        if iterations > 0:
+            best = min(best, (time.perf_counter() - t0) / iterations)
+    return best if math.isfinite(best) else 1e-3
 
 
-def compiled_library(nlp: dict[str, Any], options: dict[str, Any], settings: SolverSettings) -> str | None:
-    """The path of a shared library with the functions of ``nlp`` (the NLP and the derivatives the
-    solver evaluates), from the disk cache when it holds this exact NLP, else compiled.
-
-    The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or gcc) at
-    ``-O{jit_opt}`` in a private temporary directory, then moved into ``jit_cache`` under a hash of
-    the NLP, the CasADi version and the compiler flags, so any later process (or agent) with the same
-    NLP loads it in milliseconds. Nothing is written to the working directory and the process never
-    changes directory. (CasADi's own ``jit`` option cannot promise that: in CasADi 3.8 nlpsol's jit
-    writes its C source to the working directory whatever ``jit_options["directory"]`` says.)
-    Returns None (with a warning) when code generation, compilation or loading fails.
-    ``ca.nlpsol(name, solver, library, options)`` then builds a solver on it.
-    """
-    oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
-    solver = ca.nlpsol("mpc", settings.solver, oracle, options)  # for its derivative functions
-    names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
-    compiler = os.environ.get("CC", "gcc")
-    flags = [f"-O{settings.jit_opt}"]
-    key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
-    digest = hashlib.sha256("\n".join(key).encode()).hexdigest()[:24]
-    name = f"riskmpc_{digest}"
-    cache = _private_cache() if settings.jit_cache is None else os.fspath(settings.jit_cache)
-    library = os.path.join(cache, f"{name}.so")
-    try:
-        if not os.path.exists(library):
-            os.makedirs(cache, exist_ok=True)
-            with tempfile.TemporaryDirectory(prefix="riskmpc_build_") as tmp:
-                generator = ca.CodeGenerator(name, {"with_header": False})
-                generator.add(oracle)
-                for n in names:
-                    generator.add(solver.get_function(n))
-                source = generator.generate(tmp + os.sep)
-                built = os.path.join(tmp, f"{name}.so")
-                subprocess.run(
-                    [*shlex.split(compiler), "-fPIC", "-shared", *flags, source, "-o", built],
-                    cwd=tmp,
-                    check=True,
-                    capture_output=True,
-                )
-                partial = f"{library}.{os.getpid()}.tmp"
-                shutil.move(built, partial)
-                os.replace(partial, library)  # atomic: no process loads a half-written library
-        ca.nlpsol("mpc", settings.solver, library, options)  # loads: raises here, not in the caller
-        return library
-    except Exception as err:  # a broken compiler must not break the agent
-        detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]
-        warnings.warn(f"compiling the solver failed ({err} {detail}); building without jit", stacklevel=6)
-        return None
+def iteration_times(solver: ca.Function, scenario: Scenario, *layout: Any) -> tuple[float, float]:
+    """The priors of :class:`agents.budget.CallTimes`: the time per iteration [s] of ``solver``
+    on the scenario's start, and on the same start with a parked object 1 m ahead of the ego,
+    inside its boxes at every step (a failing call's, whose line searches evaluate more)."""
+    x, y, theta = scenario.ego.start.as_tuple()
+    swallowed = scenario.replace(
+        object_start=(x + math.cos(theta), y + math.sin(theta), theta), object_speed=0.0, object_turn_rate=0.0
+    )
+    return iteration_time(solver, scenario, *layout), iteration_time(solver, swallowed, *layout)
 
 
 def call_solver(
@@ -420,11 +397,3 @@ def call_solver(
     ok = ok and all(np.all(np.isfinite(out[k])) for k in ("x", "lam_x", "lam_g", "f"))
     times = {k: float(v) for k, v in stats.items() if k.startswith("t_wall_") and v}
     return out, status, ok, int(stats.get("iter_count", 0)), times
-
-
-@functools.cache
-def _private_cache() -> str:
-    """A per-process directory for compiled solvers when ``jit_cache=None`` (removed at exit)."""
-    path = tempfile.mkdtemp(prefix="riskmpc_jit_")
-    atexit.register(shutil.rmtree, path, ignore_errors=True)
-    return path

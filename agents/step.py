@@ -97,9 +97,12 @@ class Step:
         return self.report(pr, kind, states, inputs, cost, mem, violation, name, retried)
 
     def hard(self, pr: Problem, reserve: float) -> tuple[Outputs | None, bool]:
-        """Level (a): ``(the best converged call or None, whether a cold start followed a failed
-        warm start)``. An episode's first step solves from every rollout (up to ``cold_starts``)
-        and keeps the plan of least cost, unless a pilot plan converged first."""
+        """Level (a): ``(the best converged call or None, whether it followed a failed call)``.
+        An episode's first step solves from every rollout (up to ``cold_starts``) and keeps the
+        plan of least cost, unless a pilot plan converged first; a later step solves from the
+        shifted plan only: when that fails, the soft problem, from the shifted plan and the cold
+        rollouts, gives the hard problem's solution where there is one (the penalty is exact),
+        and the least violation where there is none."""
         agent, mem = self.agent, self.memory
         first = mem is None
         warm = not first and mem.get("plan") is not None
@@ -111,8 +114,9 @@ class Step:
             out, calls = self.solve(pr, head, reserve)
             if out is not None or calls == 0:
                 return out, False
-        out, _ = self.solve(pr, self.guesses(pr, extra=False), reserve, keep_best=first)
-        return out, out is not None and warm and self.tally.failed_calls > 0
+        points = self.guesses(pr, extra=False, cold=not warm)
+        out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=agent._manoeuvre_time)
+        return out, out is not None and self.tally.failed_calls > 0
 
     def soft(self, soft: Problem) -> tuple[Outputs | None, float]:
         """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``."""
@@ -138,11 +142,24 @@ class Step:
 
     # ------------------------------------------------------------------ helpers
     def solve(
-        self, pr: Problem, points: Any, reserve: float, keep_best: bool = False
+        self,
+        pr: Problem,
+        points: Any,
+        reserve: float,
+        keep_best: bool = False,
+        reserve_after: float | None = None,
     ) -> tuple[Outputs | None, int]:
         """:func:`agents.attempts.solve` of ``pr`` from ``points`` within the step's budget."""
         return attempts.solve(
-            self.agent._call, pr, points, self.args(pr), self.budget, reserve, self.tally, keep_best
+            self.agent._call,
+            pr,
+            points,
+            self.args(pr),
+            self.budget,
+            reserve,
+            self.tally,
+            keep_best,
+            reserve_after,
         )
 
     def args(self, pr: Problem) -> dict[str, Any]:
@@ -158,14 +175,16 @@ class Step:
         lbg[pr.risk_rows] = self.agent.backoff
         return lbg
 
-    def guesses(self, pr: Problem, extra: bool) -> Iterator[Guess]:
-        """Initial points, lazily: the shifted previous plan (if any), then the cold rollouts best
-        first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them)."""
+    def guesses(self, pr: Problem, extra: bool, cold: bool = True) -> Iterator[Guess]:
+        """Initial points, lazily: the shifted previous plan (if any), then (``cold``) the cold
+        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them)."""
         agent, mem, lbg = self.agent, self.memory, self.lbg(pr)
         if mem is not None and mem.get("plan") is not None:
             ipopt = agent.settings.warm_start and agent.settings.solver == "ipopt"
             old = agent._problems.get(mem["variant"]) if ipopt else None
             yield attempts.warm_guess(pr, old, mem, self.x0, self.p, lbg, agent._maps)
+        if not cold:
+            return
         more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
         for w0 in guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)[: agent.cold_starts]:
             yield w0, None, None

@@ -12,6 +12,11 @@ A scene (:func:`make_scenes`, reproducible from ``(seed, index)``) draws:
   ``"crossing"`` (timed to cross the path 2-8 s ahead, near where the ego would be then, at
   1-4 m/s) and ``"never"`` (12-25 m off the path, heading away from it or along it, 0-4 m/s).
 
+**Infeasible steps** (:func:`infeasible_first_step`): for the agents whose risk row is the box
+clearance (the RMPC, the exact SMPC at epsilon = 0), a step is certified infeasible when no input
+within the rate limits clears even the first truncation box; such a step needs a fallback level
+whatever the solver does.
+
 **Avoidable collision** (:func:`avoidable`): some open-loop manoeuvre of :func:`manoeuvres`, from
 the episode's start state, keeps the ego's centre more than r_e + r_o from the object's *true*
 motion at every step of the episode's whole budget (``max_steps``), as the env checks it (at the
@@ -35,6 +40,7 @@ from risk_env.dynamics import unicycle_step
 from risk_env.ops import NUMPY
 from risk_env.path import point
 from risk_env.prediction import predict
+from risk_env.risk import signed_box_distance
 from risk_env.scenario import Scenario, Uncertainty
 from risk_env.transition import move_object
 
@@ -191,3 +197,32 @@ def witness_clearance(scene: Scene, truth: np.ndarray | None = None) -> float:
 def avoidable(scene: Scene, truth: np.ndarray | None = None) -> bool:
     """Whether some witness manoeuvre keeps clear of the object's true motion (see the module)."""
     return witness_clearance(scene, truth) > 0.0
+
+
+CERTIFY_GRID = 61
+"""Points per input axis of :func:`infeasible_first_step`'s grid."""
+
+
+def infeasible_first_step(
+    scenario: Scenario, ego_pose: np.ndarray, last_input: np.ndarray, measurement: np.ndarray, backoff: float
+) -> bool:
+    """Whether no input within the bounds and rate limits keeps the ego's next position clear of
+    the object's first truncation box by ``backoff`` [m] (the RMPC's row at n = 1, and the exact
+    SMPC's at epsilon = 0): certified on a grid of the inputs, with the grid's worst position error
+    (a Lipschitz bound) as margin. ``ego_pose`` (3,), ``last_input`` (v, omega), ``measurement``
+    the object's (c1, c2, theta, v, omega)."""
+    ego, dt = scenario.ego, scenario.dt
+    dv, dw = ego.accel_max * dt, ego.omega_rate_max * dt
+    v = np.linspace(max(ego.v_min, last_input[0] - dv), min(ego.v_max, last_input[0] + dv), CERTIFY_GRID)
+    w = np.linspace(
+        max(-ego.omega_max, last_input[1] - dw), min(ego.omega_max, last_input[1] + dw), CERTIFY_GRID
+    )
+    vv, ww = np.meshgrid(v, w, indexing="ij")
+    x, y, _ = unicycle_step(*(np.full(vv.shape, c) for c in ego_pose[:3]), vv, ww, dt, NUMPY)
+    belief = predict(scenario, tuple(float(m) for m in measurement), steps=1)[1]
+    distance = signed_box_distance(x - belief.x, y - belief.y, belief.half_x, belief.half_y)
+    # a position between grid points lies within this of one: the arc moves by at most dt per m/s
+    # of speed and by |v| dt^2 / 2 per rad/s of turn rate
+    h_v, h_w = (v[-1] - v[0]) / (CERTIFY_GRID - 1), (w[-1] - w[0]) / (CERTIFY_GRID - 1)
+    slack = 0.5 * (dt * h_v + np.max(np.abs(v)) * dt * dt * h_w)
+    return bool(np.max(distance) - scenario.collision_distance + slack < backoff)

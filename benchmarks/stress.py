@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from benchmarks.scenes import Scene, make_scenes, object_truth, witness_clearance
+from benchmarks.scenes import Scene, infeasible_first_step, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import run_sweep
 
 AGENTS: dict[str, tuple[str, str, float]] = {
@@ -58,6 +58,7 @@ EPISODE_COLUMNS = (
     "fallback_soft",
     "fallback_manoeuvre",
     "penalty_steps",
+    "infeasible_steps",
     "failed_calls",
     "capped_steps",
     "solve_ms_p50",
@@ -74,6 +75,7 @@ SUMMARY_COLUMNS = (
     "soft_pct",
     "manoeuvre_pct",
     "penalty_steps",
+    "infeasible_pct",
     "failed_calls",
     "capped_steps",
     "solve_ms_p50",
@@ -129,12 +131,25 @@ def run_job(job: Job) -> dict[str, Any]:
         "fallback_soft": record.fallbacks("soft"),
         "fallback_manoeuvre": record.fallbacks("manoeuvre"),
         "penalty_steps": int(sum(r.fallback is None and r.variant.endswith("_soft") for r in reports)),
+        "infeasible_steps": infeasible_steps(scene, record, epsilon, agent) if epsilon == 0.0 else "",
         "failed_calls": int(sum(getattr(r, "failed_calls", int(r.failed)) for r in reports)),
         "capped_steps": int(sum(bool(getattr(r, "capped", False)) for r in reports)),
         "solve_ms_p50": round(float(np.median(ms)), 3),
         "solve_ms_max": round(float(ms.max()), 3),
         "_times": record.solve_time,
     }
+
+
+def infeasible_steps(scene: Scene, record: Any, epsilon: float, agent: Any) -> int:
+    """Fallback steps of the episode certified infeasible at n = 1 (:func:`scenes.infeasible_first_step`,
+    for a risk row that is the box clearance: epsilon = 0)."""
+    sc = scene.scenario(epsilon)
+    count = 0
+    for k in np.flatnonzero(record.fallback):
+        last = np.asarray(sc.ego.initial_input) if k == 0 else record.actions[k - 1]
+        measurement = (*record.object[k], sc.object.turn_rate)
+        count += infeasible_first_step(sc, record.ego[k, :3], last, np.array(measurement), agent.backoff)
+    return count
 
 
 def summarise(agent: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -156,6 +171,9 @@ def summarise(agent: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "soft_pct": round(100.0 * soft / steps, 3),
         "manoeuvre_pct": round(100.0 * manoeuvre / steps, 3),
         "penalty_steps": sum(r["penalty_steps"] for r in rows),
+        "infeasible_pct": round(100.0 * sum(r["infeasible_steps"] for r in rows) / steps, 3)
+        if all(r["infeasible_steps"] != "" for r in rows)
+        else "",
         "failed_calls": sum(r["failed_calls"] for r in rows),
         "capped_steps": sum(r["capped_steps"] for r in rows),
         "solve_ms_p50": round(float(np.percentile(ms, 50)), 2),
@@ -177,12 +195,15 @@ def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command:
         "safest rate-limited manoeuvre. Penalty: steps whose hard calls failed but whose soft plan",
         "had zero slacks, so it solved the hard problem (the exact penalty; level (a), not a",
         "fallback). Failed calls: solver calls that did not converge (every attempt of a step).",
-        "Capped: steps where the time cap cut a call short or left no time for one. Step time: the",
-        "whole `predict` call [ms].",
+        "Infeasible: fallback steps certified infeasible at n = 1 (no input within the rate limits",
+        "clears the first truncation box; for epsilon = 0, whose row is the box clearance), a share of",
+        "all steps: a fallback must act there. Capped: steps where the time cap cut a call short or left",
+        "no time for one. Step time: the whole `predict` call [ms].",
         "",
         "| agent | method | eps [J] | scenes | steps | collisions (avoidable / unavoidable) |"
-        " fallback % (soft / manoeuvre) | penalty | failed calls | capped | p50 | p95 | p99 | max [ms] |",
-        "|" + " --- |" * 14,
+        " fallback % (soft / manoeuvre) | infeasible % | penalty | failed calls | capped |"
+        " p50 | p95 | p99 | max [ms] |",
+        "|" + " --- |" * 15,
     ]
     for s in summary:
         method, risk, eps = AGENTS[s["agent"]]
@@ -190,6 +211,7 @@ def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command:
             f"| {s['agent']} | {method} {risk} | {eps:g} | {s['scenes']} | {s['steps']} | "
             f"{s['collisions']} ({s['avoidable']} / {s['unavoidable']}) | "
             f"{s['fallback_pct']:.2f} ({s['soft_pct']:.2f} / {s['manoeuvre_pct']:.2f}) | "
+            f"{'-' if s['infeasible_pct'] == '' else format(s['infeasible_pct'], '.2f')} | "
             f"{s['penalty_steps']} | {s['failed_calls']} | {s['capped_steps']} | {s['solve_ms_p50']:.1f} | "
             f"{s['solve_ms_p95']:.1f} | {s['solve_ms_p99']:.1f} | {s['solve_ms_max']:.1f} |"
         )

@@ -399,12 +399,16 @@ def test_rungs_hold_the_solvers_own_limits() -> None:
     ipopt = SolverSettings(solver="ipopt", max_iter=100, rungs=3, time_limit=0.1)
     assert ipopt.rung_limits() == ((100, 0.1), (100, 0.05), (100, 0.025))
     assert ipopt.plugin_options(1)["ipopt"]["max_wall_time"] == 0.05
-    times = CallTimes(fatrop.rung_limits(), prior=1e-3)
-    assert times.rung(0.2) == 0 and times.rung(0.04) == 2 and times.rung(0.01) is None
-    for _ in range(10):
-        times.record(10, 0.0205)  # 2 ms per iteration
-    assert times.per_iteration() == pytest.approx(1.3 * 2e-3, rel=1e-3)
-    assert times.rung(0.2) == 1
+    times = CallTimes(fatrop.rung_limits(), prior=1e-3, failing=4e-3)
+    # before any call: 1.3 x the priors per iteration, the failing call's for a long one
+    assert times.per_iteration(5) == pytest.approx(1.3e-3) and times.per_iteration(25) == pytest.approx(
+        5.2e-3
+    )
+    assert times.rung(0.6) == 0 and times.rung(0.2) == 2 and times.rung(0.1) is None
+    assert times.per_iteration(5) == pytest.approx(0.8 * 1.3e-3)  # discounted after the skip
+    for _ in range(20):
+        times.record(30, 30 * 1e-3 + 5e-4)  # long calls at 1 ms per iteration
+    assert times.per_iteration(25) == pytest.approx(1.3e-3) and times.rung(0.2) == 0
     with pytest.raises(ValueError, match="rungs"):
         SolverSettings(rungs=0)
 
@@ -519,10 +523,11 @@ def test_compiled_solver_writes_nothing_to_the_working_directory(tmp_path, monke
     np.testing.assert_allclose(action, plain.predict(obs)[0], atol=1e-6)
     assert agent.last_solve.iterations == plain.last_solve.iterations
     # a new process (here: the in-process solver cache emptied) loads the libraries, compiles nothing
+    from agents import compiled
     from agents import solver as mpc
 
     monkeypatch.setattr(mpc, "_SOLVER_CACHE", type(mpc._SOLVER_CACHE)())
-    monkeypatch.setattr(mpc.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
+    monkeypatch.setattr(compiled.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
     again = RMPC(scenario, jit=True, jit_opt=0, jit_cache=cache)
     assert again.compiled and sorted(p.name for p in cache.iterdir()) == libraries
     np.testing.assert_allclose(again.predict(obs)[0], action, atol=1e-9)
