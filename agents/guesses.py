@@ -86,11 +86,11 @@ def initial_point(
     w = pack(problem, rollout(problem, x0, inputs), inputs)
     cost, g = problem.evaluate(w, p)
     cost, g = float(cost), np.asarray(g).ravel()
-    if problem.slack_index.size:  # the objective is linear in the slacks: sum_n rho_n s_n
+    if problem.slack_index.size:  # the slacks where the rows fall short
         shortfall = np.maximum(lbg[problem.risk_rows] - g[problem.risk_rows], 0.0)
         w[problem.slack_index] = shortfall + SLACK_PUSH
         g[problem.risk_rows] += shortfall + SLACK_PUSH
-        cost += float(problem.slack_costs @ w[problem.slack_index])
+        cost = float(problem.evaluate(w, p)[0])
     violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
     return w, violation, cost
 

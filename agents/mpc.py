@@ -20,6 +20,7 @@ The optimal control problem is in :mod:`agents.ocp`, its solver (options, compil
 from __future__ import annotations
 
 import functools
+import gc
 import math
 import os
 from typing import Any, ClassVar
@@ -322,7 +323,7 @@ class PathFollowingMPC:
             key = (
                 type(self).__name__,
                 variant,
-                problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
+                problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
             )
@@ -365,8 +366,14 @@ class PathFollowingMPC:
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
         """One step for the observation ``obs_vec`` (15,) of batch entry ``index``
         (:class:`agents.step.Step`), within the wall-time cap."""
-        with Budget.open(self.max_solve_time) as budget:
-            return Step(self, index, obs_vec, budget).run()
+        collecting = gc.isenabled()
+        gc.disable()  # no garbage-collection pause inside the step: it runs between steps
+        try:
+            with Budget.open(self.max_solve_time) as budget:
+                return Step(self, index, obs_vec, budget).run()
+        finally:
+            if collecting:
+                gc.enable()
 
     def _new_episode(self, mem: dict[str, Any], o: ob.Observation) -> bool:
         """The observation does not continue the episode this memory belongs to."""

@@ -52,7 +52,12 @@ class Step:
         self.variant = agent._risk_variant() if agent._risk_possible(self.x0, self.future) else "free"
         self.data = agent._risk_data(self.future)
         self.p = np.concatenate(
-            [o.object_measurement, [agent._epsilon], uncertainty, *(d.ravel(order="F") for d in self.data)]
+            [
+                o.object_measurement,
+                [agent._epsilon, sc.ego.v_ref],
+                uncertainty,
+                *(d.ravel(order="F") for d in self.data),
+            ]
         )
         self.tally = Tally()
 
@@ -73,7 +78,7 @@ class Step:
         if out is None and self.variant != "free":
             budget.reserve = agent._manoeuvre_time
             soft = agent._problem(soft_variant(self.variant))
-            out, violation = self.soft(soft)
+            out, violation = self.soft(soft, extra=not elastic)
             if out is not None:
                 pr = soft
                 if violation <= FEASIBLE_SLACK:  # the exact penalty's solution: the hard problem's
@@ -118,12 +123,21 @@ class Step:
         out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=agent._manoeuvre_time)
         return out, out is not None and self.tally.failed_calls > 0
 
-    def soft(self, soft: Problem) -> tuple[Outputs | None, float]:
-        """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``."""
-        out, _ = self.solve(soft, self.guesses(soft, extra=True), self.agent._manoeuvre_time)
-        if out is None:
-            return None, 0.0
-        return out, max(float(np.max(out["x"][soft.slack_index])), 0.0)
+    def soft(self, soft: Problem, extra: bool) -> tuple[Outputs | None, float]:
+        """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``: from the
+        shifted plan, then the best rollouts (``extra``: and manoeuvres) while the time lasts,
+        until a plan without violation (the hard problem's solution); else the plan of least
+        objective, so of least (early-weighted) violation."""
+
+        def violation(out: Outputs) -> float:
+            return max(float(np.max(out["x"][soft.slack_index])), 0.0)
+
+        def feasible(out: Outputs) -> bool:
+            return violation(out) <= FEASIBLE_SLACK
+
+        points = self.guesses(soft, extra=extra)
+        out, _ = self.solve(soft, points, self.agent._manoeuvre_time, keep_best=True, enough=feasible)
+        return (None, 0.0) if out is None else (out, violation(out))
 
     def manoeuvre(self) -> tuple[str, np.ndarray]:
         """Level (c): ``(name, inputs (N, NU))`` of the safest manoeuvre (:mod:`agents.fallback`),
@@ -148,18 +162,12 @@ class Step:
         reserve: float,
         keep_best: bool = False,
         reserve_after: float | None = None,
+        enough: Any = None,
     ) -> tuple[Outputs | None, int]:
         """:func:`agents.attempts.solve` of ``pr`` from ``points`` within the step's budget."""
+        args, call, tally = self.args(pr), self.agent._call, self.tally
         return attempts.solve(
-            self.agent._call,
-            pr,
-            points,
-            self.args(pr),
-            self.budget,
-            reserve,
-            self.tally,
-            keep_best,
-            reserve_after,
+            call, pr, points, args, self.budget, reserve, tally, keep_best, reserve_after, enough
         )
 
     def args(self, pr: Problem) -> dict[str, Any]:
@@ -218,6 +226,7 @@ class Step:
         tally = self.tally
         return SolveReport(
             solve_time=time.perf_counter() - self.budget.start,
+            cpu_time=time.process_time() - self.budget.cpu_start,
             success=kind != "manoeuvre",
             status=tally.status if kind != "manoeuvre" else f"manoeuvre {name} ({tally.status})",
             iterations=tally.iterations,
