@@ -262,8 +262,9 @@ def test_soft_problem_is_an_exact_penalty_where_the_hard_one_is_feasible(make, e
             # to the solver's tolerance (tol = 1e-4, scaled by the multipliers rho_n of the slacks'
             # bounds), on a problem flat in some inputs
             np.testing.assert_allclose(out["x"][soft.u_index][0, :2], report.inputs[0], atol=1e-2)
-            cost = float(out["f"][0]) - float(soft.slack_costs @ slacks)
-            assert cost == pytest.approx(report.cost, rel=1e-3)
+            w = np.zeros(hard.n_w)  # the soft plan in the hard problem's layout: its objective
+            w[hard.x_index], w[hard.u_index] = out["x"][soft.x_index], out["x"][soft.u_index]
+            assert float(hard.evaluate(w, step.p)[0]) == pytest.approx(report.cost, rel=1e-3)
             # ... because rho exceeds the hard rows' multipliers
             hard_out = agent._memory[0]
             multipliers = (
@@ -592,6 +593,19 @@ def test_uncertainty_levels_and_tolerances_share_one_solver():
         risk = plan_risk(agent, agent.scenario, obs, "exact")
         assert agent.last_solve.success and np.all(risk <= agent.risk_tolerance + RISK_TOLERANCE_J)
         np.testing.assert_allclose(agent.last_solve.risk, risk, rtol=1e-9, atol=1e-9)
+
+
+def test_agents_with_other_starts_and_reference_speeds_share_one_solver():
+    """v_ref is a parameter and the starts are measured: one build serves them all, and each agent
+    plans toward its own reference speed."""
+    base = Scenario.preset("low", max_steps=30, object_start=(60.0, -80.0, np.pi / 2))
+    first = RMPC(base.replace(v_ref=2.0))
+    other = RMPC(base.replace(v_ref=7.0, ego_start=(-20.0, 14.0, -0.2), initial_input=(1.0, 0.0)))
+    assert other.build_time == 0.0  # the first one's solvers
+    for agent in (first, other):
+        env = gym.make("RiskCrossing-v0", scenario=agent.scenario)
+        run = closed_loop(agent, env, 25)
+        assert run["ego"][-1, 3] == pytest.approx(agent.scenario.ego.v_ref, abs=0.05)
 
 
 def test_agents_with_different_estimators_share_a_process():
