@@ -102,11 +102,12 @@ def cold_guesses(
     p: np.ndarray,
     lbg: np.ndarray,
     extra: dict[str, np.ndarray] | None = None,
-) -> list[np.ndarray]:
+) -> list[tuple[np.ndarray, float]]:
     """The :func:`candidates` (and the ``extra`` input sequences ``(N, NU)``) as initial points w
-    (:func:`initial_point`), best first: smallest constraint violation, then cost."""
+    (:func:`initial_point`) with their constraint violations, best first: smallest violation, then
+    cost."""
     scored = []
     for inputs in [*candidates(scenario, x0).values(), *(extra or {}).values()]:
         w0, violation, cost = initial_point(problem, x0, inputs, p, lbg)
         scored.append((violation, cost, len(scored), w0))
-    return [w0 for *_, w0 in sorted(scored, key=lambda s: s[:3])]
+    return [(w0, violation) for violation, _, _, w0 in sorted(scored, key=lambda s: s[:3])]

@@ -78,7 +78,7 @@ class Step:
         if out is None and self.variant != "free":
             budget.reserve = agent._manoeuvre_time
             soft = agent._problem(soft_variant(self.variant))
-            out, violation = self.soft(soft, extra=not elastic)
+            out, violation = self.soft(soft, elastic)
             if out is not None:
                 pr = soft
                 if violation <= FEASIBLE_SLACK:  # the exact penalty's solution: the hard problem's
@@ -123,11 +123,12 @@ class Step:
         out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=agent._manoeuvre_time)
         return out, out is not None and self.tally.failed_calls > 0
 
-    def soft(self, soft: Problem, extra: bool) -> tuple[Outputs | None, float]:
+    def soft(self, soft: Problem, elastic: bool) -> tuple[Outputs | None, float]:
         """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``: from the
-        shifted plan, then the best rollouts (``extra``: and manoeuvres) while the time lasts,
-        until a plan without violation (the hard problem's solution); else the plan of least
-        objective, so of least (early-weighted) violation."""
+        shifted plan, then (unless ``elastic``: the last step missed the bound too, and its
+        plan is the best start) the best rollouts and manoeuvres while the time lasts, until a
+        plan without violation (the hard problem's solution); else the plan of least objective,
+        so of least (early-weighted) violation."""
 
         def violation(out: Outputs) -> float:
             return max(float(np.max(out["x"][soft.slack_index])), 0.0)
@@ -135,7 +136,7 @@ class Step:
         def feasible(out: Outputs) -> bool:
             return violation(out) <= FEASIBLE_SLACK
 
-        points = self.guesses(soft, extra=extra)
+        points = self.guesses(soft, extra=True, cold=not elastic)
         out, _ = self.solve(soft, points, self.agent._manoeuvre_time, keep_best=True, enough=feasible)
         return (None, 0.0) if out is None else (out, violation(out))
 
@@ -185,7 +186,9 @@ class Step:
 
     def guesses(self, pr: Problem, extra: bool, cold: bool = True) -> Iterator[Guess]:
         """Initial points, lazily: the shifted previous plan (if any), then (``cold``) the cold
-        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them)."""
+        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them); for
+        the hard problem only the best when even that one misses its rows (then the hard problem
+        is likely infeasible, and the soft one takes the other starts)."""
         agent, mem, lbg = self.agent, self.memory, self.lbg(pr)
         if mem is not None and mem.get("plan") is not None:
             ipopt = agent.settings.warm_start and agent.settings.solver == "ipopt"
@@ -194,7 +197,10 @@ class Step:
         if not cold:
             return
         more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
-        for w0 in guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)[: agent.cold_starts]:
+        cold_points = guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)
+        for i, (w0, violation) in enumerate(cold_points[: agent.cold_starts]):
+            if i > 0 and violation > 0.0 and not pr.soft:
+                return  # even the best rollout misses the rows: likely infeasible, the soft level's
             yield w0, None, None
 
     def report(

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from benchmarks.scenes import Scene, infeasible_first_step, make_scenes, object_truth, witness_clearance
+from benchmarks.scenes import Scene, infeasible_step, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import default_workers, run_sweep
 
 AGENTS: dict[str, tuple[str, str, float]] = {
@@ -148,14 +148,14 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def infeasible_steps(scene: Scene, record: Any, epsilon: float, agent: Any) -> int:
-    """Fallback steps of the episode certified infeasible at n = 1 (:func:`scenes.infeasible_first_step`,
-    for a risk row that is the box clearance: epsilon = 0)."""
+    """Fallback steps of the episode certified infeasible (:func:`scenes.infeasible_step`, for a
+    risk row that is the box clearance: epsilon = 0)."""
     sc = scene.scenario(epsilon)
     count = 0
     for k in np.flatnonzero(record.fallback):
         last = np.asarray(sc.ego.initial_input) if k == 0 else record.actions[k - 1]
         measurement = (*record.object[k], sc.object.turn_rate)
-        count += infeasible_first_step(sc, record.ego[k, :3], last, np.array(measurement), agent.backoff)
+        count += infeasible_step(sc, record.ego[k, :3], last, np.array(measurement), agent.backoff)
     return count
 
 
@@ -209,11 +209,12 @@ def markdown(
         "safest rate-limited manoeuvre. Penalty: steps whose hard calls failed but whose soft plan",
         "had zero slacks, so it solved the hard problem (the exact penalty; level (a), not a",
         "fallback). Failed calls: solver calls that did not converge (every attempt of a step).",
-        "Infeasible: fallback steps certified infeasible at n = 1 (no input within the rate limits",
-        "clears the first truncation box; for epsilon = 0, whose row is the box clearance), a share of",
-        "all steps: a fallback must act there. Capped: steps where the time cap cut a call short or left",
-        "no time for one. Step time: the whole `predict` call [ms] (wall time; CPU max: the process's",
-        "CPU time in the step, its own work, which the wall time exceeds when other processes ran).",
+        "Infeasible: fallback steps certified infeasible (no input sequence within the rate limits",
+        "clears the truncation box at some step n; for epsilon = 0, whose row is the box clearance), a",
+        "share of all steps: a fallback must act there. Capped: steps where the time cap cut a call",
+        "short or left no time for one. Step time: the whole `predict` call [ms] (wall time; CPU max: the",
+        "process's CPU time in the step, its own work, which the wall time exceeds when other processes",
+        "ran).",
         "Violation: median over the soft steps of max_n s_n [m of clearance for these agents].",
         "",
         "| agent | method | eps [J] | scenes | steps | collisions (avoidable / unavoidable) |"
