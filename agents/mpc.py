@@ -83,10 +83,9 @@ class PathFollowingMPC:
         (``fallback=None``, ``retried=True``, ``variant="*_soft"``). Otherwise the soft plan, the
         least violation of the risk bound the solver found (so the most clearance it could keep),
         is applied: ``fallback="soft"`` with the ``violation``.
-        After a step that missed the risk bound (``"soft"`` or ``"manoeuvre"``) the next step
-        goes to the soft problem directly, from the shifted plan only ("elastic mode", as in
-        SNOPT): the hard problem is most likely infeasible still, and where it is not, its exact
-        penalty returns its solution.
+        After a step whose soft plan missed the risk bound the next step goes to the soft problem
+        directly, from the shifted plan only ("elastic mode", as in SNOPT): the hard problem is
+        most likely infeasible still, and where it is not, its exact penalty returns its solution.
     (c) if that fails too: the safest of a family of rate-limited manoeuvres (brake, hold,
         accelerate, reverse, each straight or turning fully left or right; :mod:`agents.fallback`),
         judged by the agent's own risk and the worst-case clearance over the horizon:

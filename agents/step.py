@@ -26,7 +26,9 @@ if TYPE_CHECKING:
     from agents.mpc import PathFollowingMPC
 
 SOFT_SHARE = 0.3
-"""Share of the cap the hard problem's calls leave to the soft problem."""
+"""Most of the cap the hard problem's calls leave to the soft problem."""
+SOFT_ITERATIONS = 30
+"""Iterations a soft solve is given time for, before the hard problem's calls."""
 FEASIBLE_SLACK = 1e-4
 """Slacks up to this [margin units] count as zero: the hard problem was feasible."""
 MANOEUVRE_TIME = 3e-3
@@ -65,9 +67,7 @@ class Step:
     def run(self) -> SolveReport:
         """The three levels in order; the report of the one that acted."""
         agent, budget = self.agent, self.budget
-        capped = math.isfinite(agent.max_solve_time) and self.variant != "free"
-        soft_time = agent.max_solve_time * SOFT_SHARE if capped else 0.0
-        budget.reserve = agent._manoeuvre_time + soft_time
+        budget.reserve = agent._manoeuvre_time + self.soft_reserve()
         pr = agent._problem(self.variant)
         # elastic mode: after a step that missed the risk bound, the hard problem is most likely
         # infeasible still; its exact penalty (b) gives its solution where it is feasible
@@ -98,8 +98,21 @@ class Step:
             kind = "manoeuvre"
             name, inputs = self.manoeuvre()
             states, cost = guesses.rollout(self.base, self.x0, inputs), float("nan")
-            mem = {"plan": inputs, "lam_x": None, "variant": None, "violation": math.inf}
+            # not elastic after this: nothing converged, maybe for lack of time (the soft problem
+            # is no faster), so the next step tries the hard problem again, from this plan
+            mem = {"plan": inputs, "lam_x": None, "variant": None, "violation": 0.0, "manoeuvre": True}
         return self.report(pr, kind, states, inputs, cost, mem, violation, name, retried)
+
+    def soft_reserve(self) -> float:
+        """Time [s] the hard problem's calls leave to the soft one: what :data:`SOFT_ITERATIONS`
+        of its iterations take, if that fits in :data:`SOFT_SHARE` of the cap; else nothing (the
+        soft problem could not finish in time anyway, so the hard one gets the time)."""
+        cap = self.agent.max_solve_time
+        if not math.isfinite(cap) or self.variant == "free":
+            return 0.0
+        times = self.agent._problem(soft_variant(self.variant)).times
+        need = SOFT_ITERATIONS * times.per_iteration(SOFT_ITERATIONS)
+        return need if need <= SOFT_SHARE * cap else 0.0
 
     def hard(self, pr: Problem, reserve: float) -> tuple[Outputs | None, bool]:
         """Level (a): ``(the best converged call or None, whether it followed a failed call)``.
@@ -119,7 +132,10 @@ class Step:
             out, calls = self.solve(pr, head, reserve)
             if out is not None or calls == 0:
                 return out, False
-        points = self.guesses(pr, extra=False, cold=not warm)
+        # after a manoeuvre its continuation is a poor start for path following: the best
+        # rollout first, then that
+        after_manoeuvre = warm and mem.get("manoeuvre", False)
+        points = self.guesses(pr, extra=False, cold=not warm or after_manoeuvre, cold_first=after_manoeuvre)
         out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=agent._manoeuvre_time)
         return out, out is not None and self.tally.failed_calls > 0
 
@@ -184,24 +200,30 @@ class Step:
         lbg[pr.risk_rows] = self.agent.backoff
         return lbg
 
-    def guesses(self, pr: Problem, extra: bool, cold: bool = True) -> Iterator[Guess]:
+    def guesses(
+        self, pr: Problem, extra: bool, cold: bool = True, cold_first: bool = False
+    ) -> Iterator[Guess]:
         """Initial points, lazily: the shifted previous plan (if any), then (``cold``) the cold
         rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them); for
         the hard problem only the best when even that one misses its rows (then the hard problem
-        is likely infeasible, and the soft one takes the other starts)."""
+        is likely infeasible, and the soft one takes the other starts). ``cold_first``: the best
+        rollout, then the shifted plan."""
         agent, mem, lbg = self.agent, self.memory, self.lbg(pr)
+        warm: list[Guess] = []
         if mem is not None and mem.get("plan") is not None:
             ipopt = agent.settings.warm_start and agent.settings.solver == "ipopt"
             old = agent._problems.get(mem["variant"]) if ipopt else None
-            yield attempts.warm_guess(pr, old, mem, self.x0, self.p, lbg, agent._maps)
-        if not cold:
-            return
-        more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
-        cold_points = guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)
-        for i, (w0, violation) in enumerate(cold_points[: agent.cold_starts]):
-            if i > 0 and violation > 0.0 and not pr.soft:
-                return  # even the best rollout misses the rows: likely infeasible, the soft level's
-            yield w0, None, None
+            warm = [attempts.warm_guess(pr, old, mem, self.x0, self.p, lbg, agent._maps)]
+        if not cold_first:
+            yield from warm
+        if cold:
+            more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
+            cold_points = guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)
+            likely_infeasible = not pr.soft and cold_points[0][1] > 0.0  # even the best misses its rows
+            for w0, _ in cold_points[: 1 if likely_infeasible or cold_first else agent.cold_starts]:
+                yield w0, None, None
+        if cold_first:
+            yield from warm
 
     def report(
         self,
