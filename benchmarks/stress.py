@@ -328,12 +328,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
             writer.writeheader()
             writer.writerows(table)
-    workers = (
-        1
-        if args.ray is False and (args.workers or default_workers()) <= 1
-        else args.workers or default_workers()
-    )
-    text = markdown(summary, rows, command.strip(), wall, workers)
+    workers = args.workers or default_workers()
+    where = "a Ray cluster" if args.ray is not False else f"{workers} worker process(es)"
+    text = markdown(summary, rows, command.strip(), wall, where)
     (args.out / "stress.md").write_text(text)
     print(text)
     print(
