@@ -3,6 +3,8 @@ of the solver rung (:meth:`agents.solver.SolverSettings.rung_limits`) that fits 
 
 IPOPT stops itself at its ``max_wall_time``; fatrop (CasADi 3.8) has no time limit, only
 ``max_iter``, so its calls are predicted from the measured time per iteration of the same NLP.
+That ``max_iter`` bounds fatrop's main loop, not its restoration phase: a call that enters it may
+overrun (rare: about one call in 8,000 of the exact SMPC in the stress benchmark).
 """
 
 from __future__ import annotations
