@@ -1,5 +1,6 @@
 """Gymnasium's vector-env conventions for :mod:`risk_env.vector_env`: the autoreset mode given by
-name, and infos masked per copy (the ``final_info`` of same-step autoreset)."""
+name, the single env's info keys as arrays over copies, and infos masked per copy (the
+``final_info`` of same-step autoreset)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ from typing import Any
 
 import numpy as np
 from gymnasium.vector import AutoresetMode
+
+from risk_env.transition import Observed
 
 
 def parse_autoreset_mode(value: AutoresetMode | str) -> AutoresetMode:
@@ -40,3 +43,47 @@ def where(mask: np.ndarray, new: Any, old: Any) -> Any:
         return {k: (where(mask, new[k], old[k]) if not k.startswith("_") else old[k]) for k in new}
     m = mask.reshape(mask.shape + (1,) * (np.ndim(new) - 1))
     return np.where(m, new, old)
+
+
+def infos(
+    seen: Observed,
+    risk: np.ndarray,
+    terms: np.ndarray,
+    episode_risk: np.ndarray,
+    state: np.ndarray,
+    present: np.ndarray | None,
+    rewards: dict[str, np.ndarray],
+    risk_tolerance: float,
+    mask: np.ndarray,
+) -> dict[str, Any]:
+    """The single env's info keys as arrays over B copies, each with the all-True ``_key``
+    ``mask``: from the observed state, the risk ``(B,)`` and its terms ``(M, B)``, the batched
+    state ``(5 + 5 M, B)`` and which objects are present ``(M, B)`` (None: all)."""
+    count = terms.shape[0]
+    objects = state[5:].reshape(count, 5, -1)[:, :4].transpose(2, 0, 1).copy()  # (B, M, 4)
+    if present is not None:
+        objects *= present.T[:, :, None]
+        present = present.T.copy()
+    else:
+        present = np.ones((state.shape[1], count), dtype=bool)
+    out = {
+        "risk": risk,
+        "cost": risk.copy(),
+        "risk_terms": terms.T.copy(),
+        "episode_risk": episode_risk.copy(),
+        "risk_violation": risk > risk_tolerance,
+        "collision": seen.collision,
+        "distance": seen.distance,
+        "closest_object": seen.closest,
+        "path_error": seen.path_error,
+        "lambda": seen.lam,
+        "ego": state[0:4].T.copy(),
+        "object": objects[:, 0].copy(),
+        "objects": objects,
+        "present": present,
+        "is_success": seen.goal & ~seen.collision,
+    }
+    out = {k: v for key, value in out.items() for k, v in ((key, value), (f"_{key}", mask))}
+    out["rewards"] = {**rewards, **{f"_{k}": mask for k in rewards}}
+    out["_rewards"] = mask
+    return out

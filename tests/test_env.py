@@ -108,8 +108,8 @@ def test_defaults_are_the_papers_low_preset():
     assert env.estimator.name == "exact"
     assert env.object_motion == "paper"
     assert env.metadata["render_fps"] == pytest.approx(2.0)
-    assert RiskCrossingEnv.observation_slices is observation.SLICES
-    assert env.observation_space.shape == (observation.SIZE,)
+    assert env.observation_slices == observation.SLICES and env.object_slots == 1
+    assert env.observation_space.shape == (observation.SIZE,) == (16,)
     assert env.observation_space.dtype == np.float32
     assert np.all(np.isfinite(env.observation_space.low))
 
@@ -197,6 +197,10 @@ _INFO_TYPES = {
     "risk_violation": bool,
     "collision": bool,
     "distance": float,
+    "closest_object": int,
+    "risk_terms": np.ndarray,
+    "objects": np.ndarray,
+    "present": np.ndarray,
     "path_error": np.ndarray,
     "lambda": float,
     "ego": np.ndarray,
@@ -215,11 +219,13 @@ def test_info_keys_and_types_at_reset_and_step():
         for key, kind in _INFO_TYPES.items():
             assert type(info[key]) is kind, key
         assert info["path_error"].shape == (4,) and info["ego"].shape == (4,)
-        assert info["object"].shape == (4,)
+        assert info["object"].shape == (4,) and info["objects"].shape == (1, 4)
+        assert info["risk_terms"].shape == (1,) and info["risk_terms"][0] == info["risk"]
+        assert info["present"].tolist() == [True] and info["closest_object"] == 0
         assert set(info["rewards"]) == {"path_error", "risk"}
     assert reset_info["risk"] == 0.0 and reset_info["rewards"] == {"path_error": 0.0, "risk": 0.0}
     assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
-    assert obs1.dtype == np.float32 and obs1.shape == (15,)
+    assert obs1.dtype == np.float32 and obs1.shape == (16,)
 
 
 def test_observation_matches_info():

@@ -19,7 +19,7 @@ import pytest
 pytest.importorskip("highway_env")
 
 from agents import RMPC, SMPC  # noqa: E402
-from risk_env import ENV_ID  # noqa: E402
+from risk_env import ENV_ID, observation  # noqa: E402
 from risk_env.dynamics import unicycle_step  # noqa: E402
 from risk_env.highway import (  # noqa: E402
     IDMEgo,
@@ -208,7 +208,9 @@ def test_adapter_drives_intersection_v1():
         assert state is None and action.shape == (2,) and action.dtype == np.float32
         assert np.all(np.abs(action) <= 1.0)
         ours = adapter.last_observation
-        assert ours.shape == (15,) and np.all(np.isfinite(ours))
+        assert ours.shape == (16,) and np.all(np.isfinite(ours))
+        seen = observation.split(ours, slots=1).object_measurement[[0, 1, 3, 4]]
+        np.testing.assert_allclose(seen, adapter.last_object[[0, 1, 3, 4]], rtol=1e-6, atol=1e-4)
         np.testing.assert_allclose(ours[:2], vehicle.position, atol=1e-4)
         # the object is a vehicle on the road (or the far stand-in when none is seen)
         others = [v for v in env.unwrapped.road.vehicles if v is not vehicle]
