@@ -276,6 +276,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._objects: list[tuple[float, ...]] | None = None  # each: c1, c2, theta, v, omega
         self._uncertainties = base.uncertainties
         self._radii = base.collision_distances
+        self._present: np.ndarray = np.ones(len(base.objects), dtype=bool)
         self._steps = 0
         self._ended: str | None = None  # why the episode ended, until reset
         self._plan: np.ndarray | None = None
@@ -337,6 +338,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._ego_pose = s.ego.start.as_tuple()
         self._ego_input = s.ego.initial_input
         self._objects = [(*o.start.as_tuple(), o.speed, o.turn_rate) for o in s.objects]
+        self._present = np.arange(len(self._radii)) < len(s.objects)
+
         self._steps = 0
         self._ended = None
         self._plan = None
@@ -453,11 +456,12 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
         else:
             rewards = {"path_error": 0.0, "risk": 0.0}
-        absent = len(self._radii) - len(objects)  # objects of the base scenario not in this episode
-        states = [o[:4] for o in objects]
-        if absent:
-            terms = [*terms, *[0.0] * absent]
-            states += [(0.0, 0.0, 0.0, 0.0)] * absent
+        if len(objects) == len(self._radii):
+            states = np.array(objects)[:, :4]
+        else:  # objects of the base scenario not in this episode: zeros
+            states = np.zeros((len(self._radii), 4))
+            states[: len(objects)] = [o[:4] for o in objects]
+            terms = [*terms, *[0.0] * (len(self._radii) - len(objects))]
         collision, goal = seen.collision, seen.goal
         info = {
             "risk": risk,
@@ -471,9 +475,9 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             "path_error": seen.path_error,
             "lambda": seen.lam,
             "ego": np.array((pose[0], pose[1], pose[2], self._ego_input[0])),
-            "object": np.array(states[0]),
-            "objects": np.array(states),
-            "present": np.arange(len(self._radii)) < len(objects),
+            "object": states[0].copy(),
+            "objects": states,
+            "present": self._present.copy(),
             "rewards": rewards,
             "is_success": goal and not collision,
         }

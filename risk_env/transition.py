@@ -67,13 +67,32 @@ def advance_one(
     v, omega = action
     x, y, theta = unicycle_step(pose[0], pose[1], pose[2], v, omega, scenario.dt, MATH)
     ego = (x, y, theta, v)
-    moved, terms = [], []
-    for i, measurement in enumerate(measurements):
-        belief = predict_step(scenario, measurement, 1, MATH, uncertainties[i])
-        draws = None if uniforms is None else uniforms[3 * i : 3 * i + 3]
-        moved.append(move_object(belief, measurement, draws, MATH))
-        terms.append(estimators[i].risk_one(ego, belief, rng=rng))
-    return (x, y, theta), moved, terms
+    if len(measurements) == 1:  # the paper's scene: no loop (a step costs ~15 us)
+        moved, risk = _advance_object(
+            scenario, estimators[0], uncertainties[0], ego, measurements[0], uniforms, rng
+        )
+        return (x, y, theta), [moved], [risk]
+    pairs = [
+        _advance_object(
+            scenario, estimators[i], uncertainties[i], ego, m, uniforms and uniforms[3 * i : 3 * i + 3], rng
+        )
+        for i, m in enumerate(measurements)
+    ]
+    return (x, y, theta), [moved for moved, _ in pairs], [risk for _, risk in pairs]
+
+
+def _advance_object(
+    scenario: Scenario,
+    estimator: RiskEstimator,
+    uncertainty: Any,
+    ego: tuple[float, float, float, float],
+    measurement: Any,
+    uniforms: list[float] | None,
+    rng: np.random.Generator,
+) -> tuple[Measurement, float]:
+    """One object's step of :func:`advance_one`: its next measurement and its risk term R_i."""
+    belief = predict_step(scenario, measurement, 1, MATH, uncertainty)
+    return move_object(belief, measurement, uniforms, MATH), estimator.risk_one(ego, belief, rng=rng)
 
 
 class Observed(NamedTuple):
@@ -120,6 +139,28 @@ def observe(
     error = path_error(path, x, y, theta, v, lam, v_ref, ops)
     wrap = ops.wrap_angle
     values = [x, y, wrap(theta), v, omega, lam, *error]
+    e1, e2, e3, e4 = error
+    error_norm = ops.sqrt(e1 * e1 + e2 * e2 + e3 * e3 + e4 * e4)
+    if ops is MATH and present is None:  # one state, every object present: the float fast path
+        distance, closest, collision = math.inf, 0, False
+        for i, (ox, oy, otheta, ov, oomega) in enumerate(measurements):
+            values += (1.0, ox, oy, wrap(otheta), ov, oomega)
+            d = math.hypot(x - ox, y - oy)
+            collision = collision or d <= collision_distances[i]
+            if d < distance:
+                distance, closest = d, i
+        values += [0.0] * (observation.SLOT_SIZE * (slots - len(measurements)))
+        packed = np.array(values)
+        return Observed(
+            packed.astype(np.float32),
+            packed[observation.PATH_ERROR],
+            lam,
+            distance,
+            closest,
+            collision,
+            lam >= path.lambda_goal,
+            error_norm,
+        )
     distances, collisions = [], []
     for i, (ox, oy, otheta, ov, oomega) in enumerate(measurements):
         flag = True if present is None else present[i]
@@ -138,7 +179,6 @@ def observe(
         collisions.append(d <= collision_distances[i])
     values += [0.0] * (observation.SLOT_SIZE * (slots - len(measurements)))
     packed = ops.pack(values)
-    e1, e2, e3, e4 = error
     if len(distances) == 1:
         closest = 0 if ops is MATH else np.zeros(np.shape(distances[0]), dtype=np.int64)
         distance, collision = distances[0], collisions[0]
@@ -158,7 +198,7 @@ def observe(
         closest=closest,
         collision=collision,
         goal=lam >= path.lambda_goal,
-        error_norm=ops.sqrt(e1 * e1 + e2 * e2 + e3 * e3 + e4 * e4),
+        error_norm=error_norm,
     )
 
 

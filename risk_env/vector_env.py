@@ -13,6 +13,7 @@ the modes to the same numbers to 1e-12 (risks: 1e-12 in probability).
 from __future__ import annotations
 
 import dataclasses
+from itertools import chain
 from typing import Any
 
 import gymnasium as gym
@@ -112,6 +113,9 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._never.setflags(write=False)
         self._no_terms = np.zeros((len(s.objects), n))
         self._no_terms.setflags(write=False)
+        self._all_present = np.ones((n, len(s.objects)), dtype=bool)
+        self._all_present.setflags(write=False)
+        self._all_counts = [len(s.objects)] * n
         self.scalar_copies = SCALAR_COPIES
         """Batches of up to this many copies step one by one in Python floats (0: always numpy)."""
 
@@ -146,7 +150,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._started = True
         self._autoreset[mask] = False
         seen = self._observe()
-        return seen.obs, self._infos(seen, self._no_terms, self._never)
+        return seen.obs, self._infos(seen, self._no_terms, self._never, self._no_terms[0])
 
     def step(
         self, actions: np.ndarray
@@ -178,7 +182,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         # 4. reward terms, episode end, observation, info
         seen = self._observe()
         stepped = self._mask if active is None else active
-        infos = self._infos(seen, terms, stepped)
+        infos = self._infos(seen, terms, stepped, risk)
         rewards = infos["rewards"]["path_error"] + infos["rewards"]["risk"]  # 0 where not stepped
         terminated = seen.collision | seen.goal
         truncated = self._steps >= s.max_steps
@@ -197,7 +201,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             self._reset_copies(done)
             reset_seen = self._observe()
             obs = reset_seen.obs
-            fresh = self._infos(reset_seen, self._no_terms, self._never)
+            fresh = self._infos(reset_seen, self._no_terms, self._never, self._no_terms[0])
             infos.update({k: where(done, fresh[k], infos[k]) for k in fresh if not k.startswith("_")})
         else:
             self._autoreset = done
@@ -244,27 +248,32 @@ class RiskCrossingVectorEnv(VectorEnv):
         """:meth:`_advance` for a few copies: each in Python floats by the single env's own
         :func:`~risk_env.transition.advance_one`, cheaper than numpy's per-call cost."""
         s, rows, generators = self.base_scenario, self._state.T.tolist(), self._generators
-        counts = self._counts()
+        counts, count = self._counts(), self._objects
         draws = None
         if self.object_motion == "sampled":  # each copy's 3 uniforms per present object, in order
-            per_object = [
-                generators.random(3, self._drawing(i, active)).tolist() for i in range(self._objects)
-            ]
-            draws = [[u for i in range(counts[j]) for u in per_object[i][j]] for j in range(self.num_envs)]
-        terms = [[0.0] * self.num_envs for _ in range(self._objects)]
+            if count == 1 and self._present is None:
+                per_object = [generators.random(3, active).tolist()]
+            else:
+                per_object = [generators.random(3, self._drawing(i, active)).tolist() for i in range(count)]
+            draws = per_object[0]
+            if count > 1:
+                draws = [
+                    [u for i in range(counts[j]) for u in per_object[i][j]] for j in range(self.num_envs)
+                ]
+        terms = [[0.0] * self.num_envs for _ in range(count)]
         for j, (v, omega) in enumerate(a.tolist()):
             if active is not None and not active[j]:
                 continue
             row, rng, m = rows[j], generators.borrow(j), counts[j]  # Monte Carlo draws from rng
-            objects = [row[5 + 5 * i : 10 + 5 * i] for i in range(m)]
+            objects = [row[5:10]] if m == 1 else [row[5 + 5 * i : 10 + 5 * i] for i in range(m)]
             uniforms = None if draws is None else draws[j]
             pose, moved, risks = advance_one(
                 s, self.estimators, self._uncertainties, row[0:3], (v, omega), objects, uniforms, rng
             )
             generators.give_back(j)
-            rows[j][: 5 + 5 * m] = [*pose, v, omega, *(x for o in moved for x in o)]
-            for i, r in enumerate(risks):
-                terms[i][j] = r
+            row[: 5 + 5 * m] = [*pose, v, omega, *chain.from_iterable(moved)]
+            for i, risk in enumerate(risks):
+                terms[i][j] = risk
             self._steps[j] += 1
         self._state[:] = np.array(rows).T
         return np.array(terms)
@@ -272,7 +281,7 @@ class RiskCrossingVectorEnv(VectorEnv):
     def _counts(self) -> list[int]:
         """How many objects (the first ones) cross in each copy's episode."""
         if self._present is None:
-            return [self._objects] * self.num_envs
+            return self._all_counts
         return self._present.sum(axis=0).tolist()
 
     def close_extras(self, **kwargs: Any) -> None:
@@ -384,7 +393,7 @@ class RiskCrossingVectorEnv(VectorEnv):
                     radii,
                     r[0:3],
                     r[3:5],
-                    [r[5 + 5 * i : 10 + 5 * i] for i in range(m)],
+                    [r[5:10]] if m == 1 else [r[5 + 5 * i : 10 + 5 * i] for i in range(m)],
                     slots,
                     None,
                     MATH,
@@ -397,9 +406,11 @@ class RiskCrossingVectorEnv(VectorEnv):
         ego = (state[0], state[1], state[2])
         return observe(self._path, v_ref, radii, ego, (state[3], state[4]), objects, slots, present, NUMPY)
 
-    def _infos(self, seen: Observed, terms: np.ndarray, stepped: np.ndarray) -> dict[str, Any]:
-        """The single env's info keys as arrays over copies (:func:`risk_env.vector_infos.infos`)."""
-        risk = total(terms)
+    def _infos(
+        self, seen: Observed, terms: np.ndarray, stepped: np.ndarray, risk: np.ndarray
+    ) -> dict[str, Any]:
+        """The single env's info keys as arrays over copies (:func:`risk_env.vector_infos.infos`),
+        from the terms R_i ``(M, B)`` and their sum ``risk``."""
         rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
         if stepped is not self._mask:
             rewards = {k: np.where(stepped, v, 0.0) for k, v in rewards.items()}
@@ -409,7 +420,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             terms,
             self._episode_risk,
             self._state,
-            self._present,
+            self._all_present if self._present is None else self._present.T.copy(),
             rewards,
             self.base_scenario.risk_tolerance,
             self._mask,
