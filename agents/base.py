@@ -22,8 +22,9 @@ FALLBACK_KINDS: tuple[str, ...] = ("shifted_plan", "brake")
 
 @runtime_checkable
 class Policy(Protocol):
-    """Anything with SB3's ``predict``: one observation ``(15,)`` -> action ``(2,)``, or a batch
-    ``(B, 15)`` -> ``(B, 2)``; ``state`` is the recurrent state (``None`` for MPC agents)."""
+    """Anything with SB3's ``predict``: one observation ``(10 + 6 K,)`` -> action ``(2,)``, or a
+    batch ``(B, 10 + 6 K)`` -> ``(B, 2)`` (:mod:`risk_env.observation`); ``state`` is the recurrent
+    state (``None`` for MPC agents)."""
 
     def predict(
         self,

@@ -34,6 +34,8 @@ DASHES = {"low": (0, (5, 2)), "medium": (0, (3, 1, 1, 1)), "high": (0, (1, 1))}
 """Line styles of the highest tolerance's speeds in Fig. 4, one per level."""
 MARKER_STEPS = 3
 """Markers every 1.5 s (3 steps of 0.5 s), as in the paper's Fig. 3."""
+VIEW_LIMITS = (-30.0, 50.0)
+"""Fig. 3 shows c2 [m] within these at most, however far the objects run."""
 PREFERRED = {"RMPC": "worst_case", "SMPC": "exact"}
 """The risk method drawn for each MPC when the runs hold several."""
 
@@ -103,8 +105,10 @@ def trajectories(
     px, py, _ = ref_path.point(scenario.path, lam)
     drawn = [_objects(arrays, r) for r in rows if r["method"] in methods]
     ends = [o[-1, i, 1] + radii[i] for o in drawn for i in range(o.shape[1])]
+    # the view: the paper's, grown to the objects' paths up to VIEW_LIMITS (objects run on beyond)
     top = max(38.0, max(ends, default=0.0) + 3.0, *(o[:, :, 1].max() + 3.0 for o in drawn))
     bottom = min(-12.0, *(o[:, :, 1].min() - 3.0 for o in drawn))
+    bottom, top = max(bottom, VIEW_LIMITS[0]), min(top, VIEW_LIMITS[1])
     height = 6.4 * (top - bottom) / 100.0 + 0.9  # equal aspect over c1 in [-30, 70], plus labels
     fig, axes = plt.subplots(
         len(shown),

@@ -33,31 +33,15 @@ from risk_env.parts import (
     UNCERTAINTY_PRESETS,
     CrossingObject,
     Ego,
-    Pose,
     ReferencePath,
     Uncertainty,
     check_object,
     check_uncertainty,
 )
+from risk_env.parts import Pose as Pose  # re-exported, as the parts above
 from risk_env.reach import Reach, check_observable, object_label, observation_reach
-from risk_env.scenes import SCENE_NAMES, scene_objects
-
-__all__ = [
-    "OBJECT_KEYS",
-    "OVERRIDES",
-    "RISK_TOLERANCES",
-    "SCENE_NAMES",
-    "SEVERITY_NAMES",
-    "UNCERTAINTY_PRESETS",
-    "CrossingObject",
-    "Ego",
-    "Pose",
-    "ReferencePath",
-    "Scenario",
-    "SeverityName",
-    "Uncertainty",
-    "make_objects",
-]
+from risk_env.scenes import SCENE_NAMES as SCENE_NAMES
+from risk_env.scenes import scene_objects
 
 SeverityName = Literal["paper", "plastic", "probability", "injury"]
 SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability", "injury")

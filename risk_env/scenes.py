@@ -38,11 +38,11 @@ SCENES: Mapping[str, tuple[Mapping[str, Any], ...]] = {
     "paper": (PAPER_OBJECT,),
     "two_crossing": (
         PAPER_OBJECT,
-        {"start": (25.0, 32.0, -math.pi / 2), "speed": 2.5, "turn_rate": 1e-4},
+        {"start": (25.0, 38.0, -math.pi / 2), "speed": 2.5, "turn_rate": 1e-4},
     ),
     "four_crossing": (
         PAPER_OBJECT,
-        {"start": (25.0, 32.0, -math.pi / 2), "speed": 2.5, "turn_rate": 1e-4},
+        {"start": (25.0, 38.0, -math.pi / 2), "speed": 2.5, "turn_rate": 1e-4},
         {"start": (45.0, -15.0, math.pi / 2), "speed": 2.0, "turn_rate": 1e-4},
         {"start": (12.0, 28.0, -math.pi / 2), "speed": 3.5, "turn_rate": -1e-4},
     ),

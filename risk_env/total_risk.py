@@ -12,10 +12,10 @@ approximation, and it needs no independence between the objects. (It is not the 
 any collision: with the ``"probability"`` severity, R is the expected number of collisions, an
 upper bound on that probability.)
 
-:func:`make_estimators` builds object i's estimator on :meth:`Scenario.for_object(i)
-<risk_env.scenario.Scenario.for_object>`, so every estimator of :mod:`risk_env.risk` (exact, Monte
-Carlo, worst case, grid) serves many objects unchanged; with one object it is exactly the
-estimator the env has always used.
+:func:`make_estimators` builds object i's estimator on ``scenario.for_object(i)``
+(:meth:`~risk_env.scenario.Scenario.for_object`), so every estimator of :mod:`risk_env.risk`
+(exact, Monte Carlo, worst case, grid) serves many objects unchanged; with one object it is
+exactly the estimator the env has always used.
 """
 
 from __future__ import annotations

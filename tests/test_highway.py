@@ -321,6 +321,18 @@ def test_highway_renderer_draws_the_scene_headless():
         gym.make(ENV_ID, renderer="fancy")
 
 
+def test_highway_renderer_draws_every_object():
+    env = gym.make(ENV_ID, render_mode="rgb_array", renderer="highway", scene="two_crossing")
+    env.reset(seed=0)
+    env.step(np.array([2.0, 0.0], dtype=np.float32))
+    frame = env.render()
+    renderer = env.unwrapped._renderer
+    assert len(renderer._objects) == 2
+    for x, y, *_ in env.unwrapped.object_measurements:
+        u, w = np.round(renderer._to_px(x + 0.5, y)).astype(int)
+        assert tuple(frame[w, u]) == G.OBJECT
+
+
 def test_monte_carlo_draws_are_drawn_and_seeded():
     frames = []
     for _ in range(2):
