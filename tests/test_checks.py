@@ -415,6 +415,19 @@ def test_as_batch_rejects_an_empty_batch_and_non_real_observations():
     assert not single and obs.shape == (2, 15) and obs.dtype == np.float64
 
 
+def test_an_observation_with_other_object_slots_is_named_so():
+    with pytest.raises(
+        ValueError, match=r"got \(22,\) \(an observation with 2 object slot\(s\); this agent reads 1\)"
+    ):
+        as_batch(np.zeros(22), observation.SIZE)
+    with pytest.raises(
+        ValueError, match=r"got \(3, 16\) \(an observation with 1 object slot\(s\); this agent reads 2\)"
+    ):
+        as_batch(np.zeros((3, 16)), observation.size(2))
+    with pytest.raises(ValueError, match=r"got \(15,\)$"):  # no observation of ours: no hint
+        as_batch(np.zeros(15), observation.SIZE)
+
+
 @pytest.mark.parametrize("agent_name", ["RMPC", "SMPC"])
 def test_agents_reject_an_empty_batch_by_name(agent_name):
     import agents
