@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import warnings
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -58,6 +59,10 @@ RUNGS = 6
 to 4 by default) or time (IPOPT) limit."""
 SOFT_PENALTY = 1e4
 """Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
+PLANS_AGAINST_ONE = (
+    "this MPC plans against the first present object of its observation only; the scenario's other"
+    " objects carry no risk constraint (issue 10, items 4-5)"
+)
 
 
 class PathFollowingMPC:
@@ -172,6 +177,8 @@ class PathFollowingMPC:
         self.max_solve_time = float(cap)
         """The wall-time cap of one step [s]."""
         self.scenario = scenario
+        if len(scenario.objects) > 1:
+            warnings.warn(PLANS_AGAINST_ONE, stacklevel=2)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
         self.settings = SolverSettings(
             solver=solver,
@@ -260,12 +267,13 @@ class PathFollowingMPC:
     ) -> tuple[np.ndarray, None]:
         """SB3's predictor protocol: float32 action(s) (v [m/s], omega [rad/s]) and no state.
 
-        ``observation``: one ``(15,)`` or a batch ``(B, 15)``, each solved in turn with its own
-        warm start (by batch index). ``episode_start`` (bool or ``(B,)``) drops the warm start;
+        ``observation``: one ``(10 + 6 K,)`` (K slots: the scenario's objects) or a batch ``(B, 10 + 6 K)``,
+        each solved in turn with its own warm start (by batch index); the plan respects the first
+        present object's risk bound. ``episode_start`` (bool or ``(B,)``) drops the warm start;
         so does a new episode detected from the observation (its last applied input is not the
         action returned, or the ego is over 1 m from where the plan put it).
         """
-        obs, single = as_batch(observation, ob.SIZE)
+        obs, single = as_batch(observation, ob.size(len(self.scenario.objects)))
         starts = np.zeros(len(obs), dtype=bool)
         if episode_start is not None:
             flags = np.asarray(episode_start, dtype=bool).reshape(-1)

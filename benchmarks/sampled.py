@@ -4,6 +4,7 @@
     python -m benchmarks.sampled --episodes 20 --agents smpc:exact --tolerances 0,2500
     python -m benchmarks.sampled --severities paper,probability,injury \
         --tolerances paper=0,1000,2500 --tolerances probability=0,0.01 --tolerances injury=0,0.005
+    python -m benchmarks.sampled --scene two_crossing --out results/two_crossing
 
 With ``object_motion="sampled"`` the object's true next position and speed are drawn from the
 very prediction model the agents plan with, so the env's per-step risk R_{k+1|k} is the exact
@@ -37,10 +38,11 @@ import numpy as np
 from benchmarks import cli
 from benchmarks.rollout import AGENTS, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
-from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
+from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 COLUMNS = (
     "agent",
+    "scene",
     "severity",
     "unit",
     "uncertainty",
@@ -74,6 +76,8 @@ class Job:
     uncertainty: str
     epsilon: float
     seeds: tuple[int, ...]
+    scene: str = "paper"
+    """Which road users cross (:data:`risk_env.SCENE_NAMES`)."""
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -101,17 +105,23 @@ def run_job(job: Job) -> list[dict[str, Any]]:
         risk_tolerance=job.epsilon,
         severity=job.severity,
         object_motion="sampled",
+        scene=job.scene,
     )
     agent = build_agent(*AGENTS[job.agent], env)
-    severity = make_severity(env.unwrapped.scenario)
+    scenario = env.unwrapped.scenario
+    severities = [make_severity(scenario.for_object(i)) for i in range(len(scenario.objects))]
+    radii = scenario.collision_distances
     out = []
     for seed in job.seeds:
         rec = rollout(agent, env, seed=seed)
-        # realised harm of each step: I_C s at the state reached (only the last step can collide)
+        # realised harm of each step: sum_i I_C,i s_i at the state reached (only the last step can
+        # collide), each object with its own mass and radius
         harm = np.zeros(rec.steps)
         if rec.collision:
-            e, o = rec.ego[-1], rec.object[-1]
-            harm[-1] = float(severity.value(e[3], e[2], o[3], o[2], NUMPY))
+            e = rec.ego[-1]
+            for o, r, severity, there in zip(rec.objects[-1], radii, severities, rec.info["present"]):
+                if there and np.hypot(e[0] - o[0], e[1] - o[1]) <= r:
+                    harm[-1] += float(severity.value(e[3], e[2], o[3], o[2], NUMPY))
         out.append(
             {
                 "collision": rec.collision,
@@ -150,6 +160,7 @@ def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
     solve = np.concatenate([e["solve_ms"] for e in episodes])
     return {
         "agent": job.agent,
+        "scene": job.scene,
         "severity": job.severity,
         "unit": make_severity(Scenario(severity=job.severity)).unit,
         "uncertainty": job.uncertainty,
@@ -177,9 +188,11 @@ def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
+    scenes = sorted({r.get("scene", "paper") for r in rows})
     lines = [
         "# Sampled object motion: does epsilon bound what happens?",
         "",
+        *([f"Scene {', '.join(scenes)} (risk_env.scenes).", ""] if scenes != ["paper"] else []),
         "Risks, eps and harm in the severity's own unit (given with eps). Harm/step = mean realised",
         "I_C s per step; with calibrated risk it matches Risk mean (both are per-step expected harm).",
         "Episode risk = info['episode_risk'], the summed risk of an episode (mean and max over",
@@ -221,6 +234,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="[SEVERITY=]EPS,...",
         help="comma list of epsilon in the severity's own unit (default 0,1000,2500); repeat as"
         " SEVERITY=EPS,... to give a severity its own list",
+    )
+    p.add_argument(
+        "--scene",
+        default="paper",
+        choices=SCENE_NAMES,
+        help="which road users cross (risk_env.scenes; default: the paper's one object)",
     )
     p.add_argument("--episodes", type=int, default=200, help="seeded episodes per configuration")
     p.add_argument("--chunk", type=int, default=25, help="episodes per job (one agent build per job)")
@@ -314,7 +333,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         for e in args.tolerances[s]
     ]
     jobs = [
-        Job(a, s, u, e, tuple(range(start, min(start + args.chunk, args.episodes))))
+        Job(a, s, u, e, tuple(range(start, min(start + args.chunk, args.episodes))), args.scene)
         for (a, s, u, e) in configs
         for start in range(0, args.episodes, args.chunk)
     ]
@@ -323,7 +342,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     by_config: dict[tuple, list[dict[str, Any]]] = {}
     for job, episodes in zip(jobs, results):
         by_config.setdefault((job.agent, job.severity, job.uncertainty, job.epsilon), []).extend(episodes)
-    rows = [summarise(Job(*cfg, ()), eps) for cfg, eps in by_config.items()]
+    rows = [summarise(Job(*cfg, (), args.scene), eps) for cfg, eps in by_config.items()]
     args.out.mkdir(parents=True, exist_ok=True)
     with (args.out / "sampled.csv").open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS)

@@ -608,7 +608,7 @@ def test_episode_start_of_the_wrong_size_raises():
     from agents import RMPC
 
     agent = RMPC(Scenario.preset("low"))
-    obs = np.zeros((2, 15), dtype=np.float32)
+    obs = np.zeros((2, ob.SIZE), dtype=np.float32)
     with pytest.raises(ValueError, match="episode_start must have 1 or 2 entries"):
         agent.predict(obs, episode_start=np.array([True, False, True]))
 

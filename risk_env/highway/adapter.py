@@ -1,7 +1,7 @@
 """Our MPC agents drive highway-env's controlled vehicle on ``intersection-v1``.
 
 :class:`IntersectionAdapter` sits between highway-env and an agent that speaks RiskCrossing
-(``action, _ = agent.predict(obs_15)``, :mod:`risk_env.observation`): it turns highway-env's
+(``action, _ = agent.predict(obs)``, :mod:`risk_env.observation`): it turns highway-env's
 ``Kinematics`` observation into ours and our ``(v, omega)`` into highway-env's continuous
 ``(acceleration, steering)``, and offers the same ``predict`` itself, so anything that drives a
 highway-env env with an SB3-style policy drives it.
@@ -48,6 +48,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from risk_env import observation as layout
 from risk_env.dynamics import unicycle_step
 from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
 from risk_env.ops import NUMPY
@@ -274,7 +275,7 @@ class IntersectionAdapter:
         """The solve reports of the last step, one per object."""
         self._last_solve: Any = None
         self.last_observation: np.ndarray | None = None
-        """The observation ``(15,)`` the agent got at the last step."""
+        """The observation ``(16,)`` (one object slot) the agent got at the last step."""
         self._vehicle: Any = None
         self._tracks = np.zeros((0, 5))
         self._steering = 0.0
@@ -333,13 +334,9 @@ class IntersectionAdapter:
         self.last_objects = self._select_objects(others, progress, scenario)
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
-        wrap = NUMPY.wrap_angle
         batch = np.array(
-            [
-                [x, y, wrap(theta), speed, self._omega, *o[:2], wrap(o[2]), *o[3:], lam, *error]
-                for o in self.last_objects
-            ]
-        ).astype(np.float32)  # (m, 15): one observation per object, the same ego
+            [layout.build((x, y, theta), (speed, self._omega), lam, error, [o]) for o in self.last_objects]
+        )  # (m, 16): one observation per object (one slot), the same ego
         agent = self._agent_for(self.lane)
         start = np.full(len(batch), self._fresh or switched)
         actions, _ = agent.predict(batch, episode_start=start, deterministic=True)
