@@ -321,6 +321,20 @@ class PathFollowingMPC:
         """Risk ``(N,)`` of ego states ``(N, 4)`` against the beliefs at n = 1..N."""
         raise NotImplementedError
 
+    def _risk_terms(self) -> tuple[bool, bool]:
+        """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
+        risk in its objective (:mod:`agents.risk_budget`); neither by default."""
+        return (False, False)
+
+    def _risk_value(self, ego: ca.SX, belief: Belief, data: ca.SX) -> ca.SX:
+        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`)."""
+        raise NotImplementedError
+
+    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
+        """The risk terms' solver parameters (:data:`agents.ocp.TERMS`) of batch entry ``index``
+        (empty without terms); ``new_episode``: its memory was dropped."""
+        return np.zeros(0)
+
     # ------------------------------------------------------------------ building
     def _risk_variant(self) -> str:
         return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
@@ -333,6 +347,7 @@ class PathFollowingMPC:
                 problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
+                self._risk_terms(),
             )
             build = functools.partial(
                 build_problem,
@@ -341,6 +356,8 @@ class PathFollowingMPC:
                 self.settings,
                 self._margin,
                 self._risk_parameter_shape(),
+                self._risk_value if any(self._risk_terms()) else None,
+                self._risk_terms(),
             )
             self._problems[variant] = cached_problem(key, build)
         return self._problems[variant]
