@@ -86,6 +86,8 @@ class Job:
     """Which road users cross (:data:`risk_env.SCENE_NAMES`)."""
     budget: float | None = None
     """An episode risk budget B: the agent gets ``risk_budget=B`` and no per-step bound."""
+    max_solve_time: float | None = None
+    """The MPC's wall-time cap per step [s] (None: its default, 20 % of T; ``math.inf``: none)."""
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -115,7 +117,11 @@ def run_job(job: Job) -> list[dict[str, Any]]:
         object_motion="sampled",
         scene=job.scene,
     )
-    options = {} if job.budget is None else {"risk_budget": job.budget, "risk_tolerance": math.inf}
+    options: dict[str, Any] = {}
+    if job.budget is not None:
+        options.update(risk_budget=job.budget, risk_tolerance=math.inf)
+    if job.max_solve_time is not None and not job.agent.startswith("ppo"):
+        options["max_solve_time"] = job.max_solve_time
     agent = build_agent(*AGENTS[job.agent], env, **options)
     scenario = env.unwrapped.scenario
     severities = [make_severity(scenario.for_object(i)) for i in range(len(scenario.objects))]
@@ -257,6 +263,13 @@ def build_parser() -> argparse.ArgumentParser:
         choices=SCENE_NAMES,
         help="which road users cross (risk_env.scenes; default: the paper's one object)",
     )
+    p.add_argument(
+        "--max-solve-time",
+        type=float,
+        default=None,
+        help="the MPC agents' wall-time cap per step [s] (default: 20%% of T; inf: none, so that"
+        " results do not depend on the machine's load)",
+    )
     p.add_argument("--episodes", type=int, default=200, help="seeded episodes per configuration")
     p.add_argument("--chunk", type=int, default=25, help="episodes per job (one agent build per job)")
     p.add_argument(
@@ -366,7 +379,16 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         for b in args.budgets.get(s, [])
     ]
     jobs = [
-        Job(a, s, u, e, tuple(range(start, min(start + args.chunk, args.episodes))), args.scene, b)
+        Job(
+            a,
+            s,
+            u,
+            e,
+            tuple(range(start, min(start + args.chunk, args.episodes))),
+            args.scene,
+            b,
+            args.max_solve_time,
+        )
         for (a, s, u, e, b) in configs
         for start in range(0, args.episodes, args.chunk)
     ]
