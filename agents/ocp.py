@@ -201,7 +201,9 @@ def assemble(
     def ego_at(n: int) -> Any:
         return ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
 
-    values = {n: value(ego_at(n), stacked[n], p_data[n - 1]) for n in range(1, N + 1)} if C or weight is not None else {}
+    values = {}
+    if C or weight is not None:
+        values = {n: value(ego_at(n), stacked[n], p_data[n - 1]) for n in range(1, N + 1)}
 
     def add_risk(n: int) -> Any:
         """The risk row of state n (its slack added in a soft variant), at n = N the budget row;
