@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         metavar="[SEVERITY=]B,...",
         help="comma list of episode risk budgets B in the severity's own unit: a row per budget for"
-        " each SMPC agent (risk_budget=B, no per-step bound); repeat as SEVERITY=B,...",
+        " each SMPC agent (risk_budget=B, no per-step bound); repeat as SEVERITY=B,... (default: none)",
     )
     p.add_argument(
         "--scene",
