@@ -16,8 +16,10 @@ import numpy as np
 from risk_env import checks
 from risk_env import observation as ob
 
-FALLBACK_KINDS: tuple[str, ...] = ("shifted_plan", "brake")
-"""What an MPC applies when its solve fails: the next input of the previous plan, or braking."""
+FALLBACK_KINDS: tuple[str, ...] = ("soft", "manoeuvre")
+"""The MPC's fallback levels, in order, when the hard problem gives no plan: ``"soft"`` (the plan of
+the same problem with its risk rows softened by L1-penalised slacks) and ``"manoeuvre"`` (the safest
+of a family of rate-limited manoeuvres, judged by the agent's own risk and worst-case clearance)."""
 
 
 @runtime_checkable
@@ -43,13 +45,15 @@ class SolveReport:
     solve_time: float
     """Wall time of the whole step [s]: observation, initial guess, solver call(s), fallback."""
     success: bool
-    """The plan applied came from a converged solve (IPOPT's "Solved To Acceptable Level" counts)."""
+    """The plan applied came from a converged solve of the hard or the soft problem (IPOPT's
+    "Solved To Acceptable Level" counts)."""
     status: str
     """The solver's return status of the last call (e.g. ``"Solve_Succeeded"``)."""
     iterations: int
     """Solver iterations, summed over the calls of this step."""
     fallback: str | None
-    """``None`` when the solve succeeded, else one of :data:`FALLBACK_KINDS`."""
+    """``None`` when the hard problem's plan was applied, else the level of :data:`FALLBACK_KINDS`
+    that acted."""
     action: np.ndarray
     """The input applied ``(2,)``: v [m/s], omega [rad/s]."""
     ego_trajectory: np.ndarray
@@ -73,6 +77,16 @@ class SolveReport:
     """Wall time inside the solver call(s) [s]."""
     timings: dict[str, float] = field(default_factory=dict)
     """Solver-internal wall times [s] (``t_wall_*`` of nlpsol's stats) of the last call."""
+    violation: float = 0.0
+    """``"soft"``: the largest slack, max_n s_n, by which the plan's risk rows miss ``margin_n >=
+    backoff`` [margin units: metres of clearance, or risk over the severity's scale]; 0 otherwise."""
+    manoeuvre: str = ""
+    """``"manoeuvre"``: the name of the manoeuvre applied (e.g. ``"reverse_left"``)."""
+    failed_calls: int = 0
+    """Solver calls of this step that did not converge (every attempt, every level)."""
+    capped: bool = False
+    """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
+    rung's iteration or time limit) or left no time for one."""
     risk_fn: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
     """Computes :attr:`risk` on first access (a diagnostic: the step does not wait for it)."""
     _risk: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)

@@ -1,14 +1,27 @@
-"""What the MPC applies when no solve succeeds, and the clip that keeps every applied action within
-the input bounds and rate limits."""
+"""The MPC's last resort and its safety clip: a family of rate-limited manoeuvres, the choice of the
+safest one, and the clip that keeps every applied action within the input bounds and rate limits.
+
+The family (:data:`MANOEUVRES`): each of four speed targets (brake to 0, hold the current speed,
+accelerate to v_max, reverse to v_min) with each of three turn targets (straight, full left, full
+right), every target approached as fast as the rate limits allow. :func:`safest` ranks them by
+the agent's own risk first (the longer the predicted risk stays within epsilon, the safer), then
+by the worst-case clearance (the distance from the ego disc to the object's truncation box) at the
+first step where the risk exceeds epsilon (the less it is violated, the safer), then by the
+smallest clearance over the horizon n = 1..N. So the MPC never brakes blindly: braking is chosen
+only when no other manoeuvre keeps clear of the object longer, or by more.
+"""
 
 from __future__ import annotations
-
-from typing import Any
 
 import numpy as np
 
 from agents.guesses import ramp
 from risk_env.scenario import Scenario
+
+SPEEDS: tuple[str, ...] = ("brake", "hold", "accelerate", "reverse")
+TURNS: tuple[str, ...] = ("", "left", "right")
+MANOEUVRES: tuple[str, ...] = tuple(f"{s}_{t}" if t else s for s in SPEEDS for t in TURNS)
+"""Names of the family, e.g. ``"brake"``, ``"accelerate_left"``, ``"reverse_right"``."""
 
 
 def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) -> np.ndarray:
@@ -22,18 +35,34 @@ def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) ->
     return np.array([v, w], dtype=float)
 
 
-def fallback_plan(
-    scenario: Scenario, x0: np.ndarray, memory: dict[str, Any] | None
-) -> tuple[str, np.ndarray, dict[str, Any]]:
-    """``(kind, inputs (N, NU), memory)`` after a failed step from state ``x0`` (NX,): the next
-    input of the last successful plan while one is left (``"shifted_plan"``), else v and omega
-    toward 0 as fast as the rate limits allow (``"brake"``)."""
-    plan = memory.get("plan") if memory is not None else None
-    used = memory.get("used", 0) + 1 if memory is not None else 0
-    if plan is not None and used < len(plan):
-        inputs = np.vstack([plan[used:], np.repeat(plan[-1:], used, axis=0)])
-        return "shifted_plan", inputs, {**memory, "used": used, "w": None}
+def manoeuvres(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
+    """The family's inputs ``(N, NU)`` (v [m/s], omega [rad/s], u2 = v) from the state ``x0``
+    ``(NX,)`` whose last applied input is ``x0[4:6]``, each within the bounds and rate limits."""
     ego, dt, N = scenario.ego, scenario.dt, scenario.horizon
-    v = ramp(x0[4], 0.0, ego.accel_max * dt, (ego.v_min, ego.v_max), N)
-    omega = ramp(x0[5], 0.0, ego.omega_rate_max * dt, (-ego.omega_max, ego.omega_max), N)
-    return "brake", np.column_stack([v, omega, v]), {"w": None, "plan": None, "used": 0}
+    v_lim, w_lim = (ego.v_min, ego.v_max), (-ego.omega_max, ego.omega_max)
+    v_last, w_last = float(x0[4]), float(x0[5])
+    speed = {"brake": 0.0, "hold": v_last, "accelerate": ego.v_max, "reverse": ego.v_min}
+    turn = {"": 0.0, "left": ego.omega_max, "right": -ego.omega_max}
+    out = {}
+    for s in SPEEDS:
+        v = ramp(v_last, speed[s], ego.accel_max * dt, v_lim, N)
+        for t in TURNS:
+            omega = ramp(w_last, turn[t], ego.omega_rate_max * dt, w_lim, N)
+            out[f"{s}_{t}" if t else s] = np.column_stack([v, omega, v])
+    return out
+
+
+def safest(risk: np.ndarray, clearance: np.ndarray, epsilon: float) -> int:
+    """Index of the safest manoeuvre: risk ``(M, N)`` by the agent's own estimator and worst-case
+    clearance ``(M, N)`` [m] at the states n = 1..N. Ranked by the first step whose risk exceeds
+    epsilon (later is safer; never is safest), then by the clearance at that step, then by the
+    smallest clearance over n (larger is safer); ties go to the earlier manoeuvre of the family."""
+    risk, clearance = np.asarray(risk, float), np.asarray(clearance, float)
+    if risk.shape != clearance.shape or risk.ndim != 2 or risk.shape[0] == 0:
+        raise ValueError(f"risk and clearance must be (M, N), M >= 1, got {risk.shape}, {clearance.shape}")
+    clearance = np.nan_to_num(clearance, nan=-np.inf)
+    exceeds = ~(risk <= epsilon * (1.0 + 1e-9) + 1e-9)  # NaN counts as exceeding
+    first = np.where(exceeds.any(axis=1), exceeds.argmax(axis=1), risk.shape[1])
+    rows = np.arange(len(risk))
+    at_first = np.where(first < risk.shape[1], clearance[rows, np.minimum(first, risk.shape[1] - 1)], np.inf)
+    return int(np.lexsort((-clearance.min(axis=1), -at_first, -first))[0])

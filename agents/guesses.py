@@ -1,5 +1,6 @@
 """Initial guesses for the MPC's solver: rate-limited input ramps, simulated rollouts, and the
-cold-start candidates (brake, track the path, reverse), scored on the NLP itself."""
+cold-start candidates (brake, track the path, reverse), scored on the NLP itself. A soft variant's
+guess starts its slacks where the rollout misses the risk rows."""
 
 from __future__ import annotations
 
@@ -23,6 +24,18 @@ def pack(problem: Problem, states: np.ndarray, inputs: np.ndarray) -> np.ndarray
     w = np.zeros(problem.n_w)
     w[problem.x_index] = states
     w[problem.u_index] = inputs
+    return w
+
+
+def fill_accumulators(problem: Problem, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``w`` with the budget's accumulators c_n = R_1 + ... + R_{n-1} of its plan at parameters ``p``
+    (a no-op without a budget): with c = 0 the accumulator rows are -R_n."""
+    if not problem.acc_index.size:
+        return w
+    w = w.copy()
+    w[problem.acc_index] = 0.0
+    g = np.asarray(problem.evaluate(w, p)[1]).ravel()
+    w[problem.acc_index] = np.cumsum(-g[problem.acc_rows])
     return w
 
 
@@ -70,16 +83,42 @@ def candidates(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+SLACK_PUSH = 1e-3
+"""A soft guess's slacks sit this far [margin units] above the rows' shortfall (inside s > 0)."""
+
+
+def initial_point(
+    problem: Problem, x0: np.ndarray, inputs: np.ndarray, p: np.ndarray, lbg: np.ndarray
+) -> tuple[np.ndarray, float, float]:
+    """``(w, violation, cost)``: the rollout of ``inputs`` ``(N, NU)`` from ``x0`` packed as w (a
+    soft variant's slacks set to the risk rows' shortfall, so that its rows hold), the constraint
+    violation of w against ``lbg`` and the problem's ubg at parameters ``p``, and the objective (a
+    soft variant: with the slacks' cost, so that guesses rank as the soft problem does, early
+    violations first)."""
+    w = fill_accumulators(problem, pack(problem, rollout(problem, x0, inputs), inputs), p)
+    cost, g = problem.evaluate(w, p)
+    cost, g = float(cost), np.asarray(g).ravel()
+    if problem.slack_index.size:  # the objective is linear in the slacks: sum_n rho_n s_n
+        shortfall = np.maximum(lbg[problem.risk_rows] - g[problem.risk_rows], 0.0)
+        w[problem.slack_index] = shortfall + SLACK_PUSH
+        g[problem.risk_rows] += shortfall + SLACK_PUSH
+        cost += float(problem.slack_costs @ w[problem.slack_index])
+    violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
+    return w, violation, cost
+
+
 def cold_guesses(
-    problem: Problem, scenario: Scenario, x0: np.ndarray, p: np.ndarray, lbg: np.ndarray
+    problem: Problem,
+    scenario: Scenario,
+    x0: np.ndarray,
+    p: np.ndarray,
+    lbg: np.ndarray,
+    extra: dict[str, np.ndarray] | None = None,
 ) -> list[np.ndarray]:
-    """The :func:`candidates` rolled out and packed as w, best first: smallest constraint violation
-    (against ``lbg`` and the problem's ubg at parameters ``p``), then cost."""
+    """The :func:`candidates` (and the ``extra`` input sequences ``(N, NU)``) as initial points w
+    (:func:`initial_point`), best first: smallest constraint violation, then cost."""
     scored = []
-    for inputs in candidates(scenario, x0).values():
-        w0 = pack(problem, rollout(problem, x0, inputs), inputs)
-        cost, g = problem.evaluate(w0, p)
-        g = np.asarray(g).ravel()
-        violation = np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0))
-        scored.append((float(violation), float(cost), len(scored), w0))
+    for inputs in [*candidates(scenario, x0).values(), *(extra or {}).values()]:
+        w0, violation, cost = initial_point(problem, x0, inputs, p, lbg)
+        scored.append((violation, cost, len(scored), w0))
     return [w0 for *_, w0 in sorted(scored, key=lambda s: s[:3])]

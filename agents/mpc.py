@@ -1,8 +1,10 @@
 """The path-following MPC controller: one step = measure, choose the NLP variant, warm-start,
-solve, fall back; SB3's ``predict`` on top.
+solve, degrade gracefully; SB3's ``predict`` on top.
 
 The optimal control problem is in :mod:`agents.ocp`, its solver (options, compilation, caches) in
-:mod:`agents.solver`, the cold-start initial guesses in :mod:`agents.guesses`. The controller adds:
+:mod:`agents.solver`, the initial guesses in :mod:`agents.guesses`, the time budget in
+:mod:`agents.budget`, the solve attempts in :mod:`agents.attempts`, the last resort in
+:mod:`agents.fallback`. The controller adds:
 
 - **Variant choice**: ``"free"`` (no risk rows) when no step's risk can be nonzero anywhere the ego
   can reach within the horizon (distance to the truncation box minus the distance reachable under
@@ -12,7 +14,7 @@ The optimal control problem is in :mod:`agents.ocp`, its solver (options, compil
   episode solves from each of a few rollouts (brake, track the path, reverse) and keeps the plan of
   least cost; a subclass may instead hand it the plan of a cheaper pilot problem
   (:meth:`PathFollowingMPC._pilot_plan`, the Monte Carlo SMPC's 100-draw pilot), which did that.
-- **Fallback** when every attempt fails (see :class:`PathFollowingMPC`).
+- **Graceful degradation** in a fixed order, within a wall-time cap (see :class:`PathFollowingMPC`).
 """
 
 from __future__ import annotations
@@ -20,17 +22,15 @@ from __future__ import annotations
 import functools
 import math
 import os
-import time
 import warnings
 from typing import Any, ClassVar
 
 import casadi as ca
 import numpy as np
 
-from agents import guesses
 from agents.base import SolveReport, as_batch
-from agents.fallback import fallback_plan, feasible_action
-from agents.ocp import STAGE_COSTS, problem_key, uncertainty_vector, variable_bounds
+from agents.budget import Budget
+from agents.ocp import STAGE_COSTS, problem_key, soft_variant
 from agents.solver import (
     DEFAULT_JIT_CACHE,
     SOLVERS,
@@ -40,17 +40,25 @@ from agents.solver import (
     cached_problem,
     call_solver,
 )
+from agents.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step
 from risk_env import observation as ob
 from risk_env.ops import NUMPY
 from risk_env.path import point
 from risk_env.prediction import Belief
-from risk_env.risk import signed_box_distance
+from risk_env.risk import WorstCaseRisk, signed_box_distance
 from risk_env.scenario import Scenario
 
-__all__ = ["FREE_MARGIN", "SOLVERS", "STAGE_COSTS", "PathFollowingMPC"]
+__all__ = ["FEASIBLE_SLACK", "FREE_MARGIN", "SOFT_SHARE", "SOLVERS", "STAGE_COSTS", "PathFollowingMPC"]
 
 FREE_MARGIN = 0.5
 """Extra distance [m] the reachable set must keep from every box for the ``"free"`` variant."""
+RT_SHARE = 0.2
+"""The default wall-time cap of a step, as a share of the sample time T."""
+RUNGS = 6
+"""Rungs of the solver ladder per NLP variant: 1, 1/2, ..., 1/32 of the iteration (fatrop: 150 down
+to 4 by default) or time (IPOPT) limit."""
+SOFT_PENALTY = 1e4
+"""Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
 PLANS_AGAINST_ONE = (
     "this MPC plans against the first present object of its observation only; the scenario's other"
     " objects carry no risk constraint (issue 10, items 4-5)"
@@ -61,14 +69,39 @@ class PathFollowingMPC:
     """Path-following MPC with a risk constraint; the subclasses say which (:class:`agents.RMPC`,
     :class:`agents.SMPC`). The problem is in :mod:`agents.ocp`, its solver in :mod:`agents.solver`.
 
-    Fallback when a solve fails (infeasible, iteration limit, NaN, an exception): a warm-started
-    call is retried cold from the best initial-guess rollouts (up to ``cold_starts``); if those fail
-    too, the agent applies the next input of the last successful plan while one is left
-    (``"shifted_plan"``), and after that brakes, v and omega toward 0 as fast as the rate limits
-    allow (``"brake"``; :mod:`agents.fallback`). It never raises inside an episode and never
-    returns NaN; each failure is marked in :attr:`last_solve`
-    (``fallback``) and counted in :attr:`failures` (reset by :meth:`reset`). A success is IPOPT's
-    "Solve_Succeeded" or "Solved_To_Acceptable_Level", fatrop's success flag, with finite numbers.
+    Graceful degradation, in this order, each step (never raising inside an episode, never
+    returning NaN; :attr:`last_solve` says which level acted, :attr:`failures` counts the steps
+    where (b) or (c) did):
+
+    (a) the hard problem: warm-started from the shifted previous plan (an episode's first step:
+        from each of the best initial-guess rollouts, up to ``cold_starts``, keeping the plan of
+        least cost). A success is IPOPT's "Solve_Succeeded" or "Solved_To_Acceptable_Level",
+        fatrop's success flag, with finite numbers.
+    (b) if none converges (infeasible, iteration or time limit, NaN, an exception): the same
+        problem with its risk rows softened by L1-penalised slacks (the ``"*_soft"`` variants of
+        :mod:`agents.ocp`), from the shifted plan, then the best rollouts and manoeuvres (up to
+        ``cold_starts``; they replace the hard problem's cold retries). The penalty is
+        exact: where the hard problem is feasible (and rho exceeds its risk rows' multipliers) the
+        soft problem's solution is the hard one's, with zero slacks. So a soft plan whose slacks
+        vanish (to :data:`FEASIBLE_SLACK`) solves the hard problem, and is level (a)
+        (``fallback=None``, ``retried=True``, ``variant="*_soft"``). Otherwise the soft plan, the
+        least violation of the risk bound the solver found (so the most clearance it could keep),
+        is applied: ``fallback="soft"`` with the ``violation``.
+        After a step that missed the risk bound (``"soft"`` or ``"manoeuvre"``) the next step
+        goes to the soft problem directly ("elastic mode", as in SNOPT): the hard problem is most
+        likely infeasible still, and where it is not, its exact penalty returns its solution.
+    (c) if that fails too: the safest of a family of rate-limited manoeuvres (brake, hold,
+        accelerate, reverse, each straight or turning fully left or right; :mod:`agents.fallback`),
+        judged by the agent's own risk and the worst-case clearance over the horizon:
+        ``fallback="manoeuvre"``.
+
+    **Real-time bound**: a step takes at most ``max_solve_time`` of wall time (by default 20 % of the
+    sample time), enforced through the solver's own limits: each NLP is built at a few rungs of
+    iteration limits (fatrop: ``max_iter / 2**r``) or wall-time limits (IPOPT: ``max_wall_time =
+    max_solve_time / 2**r``), and each call runs at the largest rung that fits the time left,
+    judged from the measured time per iteration (:mod:`agents.budget`). The hard problem's calls
+    leave :data:`SOFT_SHARE` of the cap to the soft problem, which leaves the manoeuvres their
+    (small, measured) time. When no rung fits, the next level acts.
 
     Args:
         scenario: the case study; its ``risk_tolerance`` is epsilon unless overridden.
@@ -93,10 +126,15 @@ class PathFollowingMPC:
             risk over the severity's scale), so a converged plan stays a hair off the boundary where
             the worst-case risk's hard indicator jumps, and float32 observations cannot put the
             applied step on its wrong side.
-        cold_starts: how many initial-guess rollouts (best first) a step may try from cold, after
-            a failed warm start; the first step of an episode solves from each of them and keeps
-            the plan of least cost (the problem is not convex: going round the object on either
-            side, waiting or reversing are separate local optima).
+        cold_starts: how many initial-guess rollouts (best first) a level may try from cold: the
+            first step of an episode solves the hard problem from each of them and keeps the plan
+            of least cost (the problem is not convex: going round the object on either side,
+            waiting or reversing are separate local optima); the soft problem tries them after
+            the shifted plan.
+        max_solve_time: the wall-time cap of one step [s] (None: 20 % of the sample time;
+            ``math.inf``: no cap, one solver per NLP).
+        soft_penalty: rho of the soft problem's penalty ``rho * sum_n s_n`` [cost per margin unit];
+            it must exceed the risk rows' multipliers for the penalty to be exact.
         solver_options: extra nlpsol options; ``{"ipopt": {...}}`` / ``{"fatrop": {...}}`` update
             the plugin's own options.
         seed: seed of the agent's generator (Monte Carlo draws).
@@ -124,6 +162,8 @@ class PathFollowingMPC:
         cold_starts: int = 3,
         solver_options: dict[str, Any] | None = None,
         seed: int | None = 0,
+        max_solve_time: float | None = None,
+        soft_penalty: float = SOFT_PENALTY,
     ) -> None:
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env Scenario, got {type(scenario).__name__}")
@@ -131,6 +171,11 @@ class PathFollowingMPC:
             raise ValueError(f"backoff must be >= 0, got {backoff!r}")
         if isinstance(cold_starts, bool) or not isinstance(cold_starts, int) or cold_starts < 1:
             raise ValueError(f"cold_starts must be an integer >= 1, got {cold_starts!r}")
+        cap = RT_SHARE * scenario.dt if max_solve_time is None else max_solve_time
+        if isinstance(cap, bool) or not isinstance(cap, (int, float)) or not cap > 0:
+            raise ValueError(f"max_solve_time must be a time > 0 [s] (or None), got {max_solve_time!r}")
+        self.max_solve_time = float(cap)
+        """The wall-time cap of one step [s]."""
         self.scenario = scenario
         if len(scenario.objects) > 1:
             warnings.warn(PLANS_AGAINST_ONE, stacklevel=2)
@@ -145,6 +190,9 @@ class PathFollowingMPC:
             max_iter=max_iter,
             warm_start=bool(warm_start),
             solver_options=dict(solver_options or {}),
+            time_limit=self.max_solve_time if math.isfinite(self.max_solve_time) else None,
+            rungs=RUNGS if math.isfinite(self.max_solve_time) else 1,
+            soft_penalty=soft_penalty,
         )
         """How the NLP is solved (:class:`agents.solver.SolverSettings`)."""
         self.backoff = float(backoff)
@@ -156,11 +204,14 @@ class PathFollowingMPC:
         self.last_solves: list[SolveReport] = []
         self._memory: dict[int, dict[str, Any]] = {}
         self._problems: dict[str, Problem] = {}
-        self._g_maps: dict[tuple[str, str], np.ndarray] = {}
+        self._maps: dict[tuple[str, str, str], np.ndarray] = {}
+        self._worst = WorstCaseRisk(scenario)
+        self._manoeuvre_time = MANOEUVRE_TIME
         ego, dt = scenario.ego, scenario.dt
         self._speed_cap = max(abs(ego.v_min), abs(ego.v_max))
         self._dv = ego.accel_max * dt
-        built = [self._problem(v) for v in ("free", self._risk_variant())]
+        variant = self._risk_variant()
+        built = [self._problem(v) for v in ("free", variant, soft_variant(variant))]
         self.build_time = sum(p.build_time for p in built)
         """Seconds spent building (with jit: compiling) the solvers at construction; 0 when they came
         from the process-wide cache."""
@@ -270,6 +321,20 @@ class PathFollowingMPC:
         """Risk ``(N,)`` of ego states ``(N, 4)`` against the beliefs at n = 1..N."""
         raise NotImplementedError
 
+    def _risk_terms(self) -> tuple[bool, bool]:
+        """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
+        risk in its objective (:mod:`agents.risk_budget`); neither by default."""
+        return (False, False)
+
+    def _risk_value(self, ego: ca.SX, belief: Belief, data: ca.SX) -> ca.SX:
+        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`)."""
+        raise NotImplementedError
+
+    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
+        """The risk terms' solver parameters (:data:`agents.ocp.TERMS`) of batch entry ``index``
+        (empty without terms); ``new_episode``: its memory was dropped."""
+        return np.zeros(0)
+
     # ------------------------------------------------------------------ building
     def _risk_variant(self) -> str:
         return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
@@ -282,6 +347,7 @@ class PathFollowingMPC:
                 problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
+                self._risk_terms(),
             )
             build = functools.partial(
                 build_problem,
@@ -290,6 +356,8 @@ class PathFollowingMPC:
                 self.settings,
                 self._margin,
                 self._risk_parameter_shape(),
+                self._risk_value if any(self._risk_terms()) else None,
+                self._risk_terms(),
             )
             self._problems[variant] = cached_problem(key, build)
         return self._problems[variant]
@@ -313,141 +381,17 @@ class PathFollowingMPC:
         spare = distance - self._reach(x0[4]) - self.scenario.collision_distance
         return bool(np.any(spare <= FREE_MARGIN))
 
-    def _g_map(self, old: Problem, new: Problem) -> np.ndarray:
-        """For each row of ``new``, the row of ``old`` one stage later (-1: none)."""
-        key = (old.variant, new.variant)
-        if key not in self._g_maps:
-            where = {tag: i for i, tag in enumerate(old.g_tags)}
-            self._g_maps[key] = np.array(
-                [where.get((s + 1, k, c), where.get((s, k, c), -1)) for s, k, c in new.g_tags], dtype=int
-            )
-        return self._g_maps[key]
-
-    def _warm_guess(
-        self, pr: Problem, mem: dict[str, Any], x0: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """The previous solution shifted by one stage, states re-simulated from ``x0``."""
-        prev_inputs = mem["w"][pr.u_index]
-        shifted = np.vstack([prev_inputs[1:], prev_inputs[-1:]])
-        w0 = guesses.pack(pr, guesses.rollout(pr, x0, shifted), shifted)
-        if not self.settings.warm_start or self.settings.solver != "ipopt":
-            return w0, None, None
-        old = self._problems[mem["variant"]]
-        g_map = self._g_map(old, pr)
-        lam_g = np.where(g_map >= 0, mem["lam_g"][np.maximum(g_map, 0)], 0.0)
-        return w0, mem["lam_x"][pr.shift_w], lam_g
-
-    def _call(self, pr: Problem, args: dict[str, Any]) -> tuple[dict[str, np.ndarray], str, bool, int, dict]:
+    def _call(
+        self, pr: Problem, args: dict[str, Any], rung: int = 0
+    ) -> tuple[dict[str, np.ndarray], str, bool, int, dict]:
         """One solver call (:func:`agents.solver.call_solver`); a method so tests can watch it."""
-        return call_solver(pr, args, self.settings.solver)
+        return call_solver(pr, args, self.settings.solver, rung)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
-        t_start = time.perf_counter()
-        o = ob.split(obs_vec)
-        sc = self.scenario
-        mem = self._memory.get(index)
-        if mem is not None and self._new_episode(mem, o):
-            mem = None
-        x0 = self._measured_state(o)
-        base = self._problem("free")
-        uncertainty = uncertainty_vector(sc)
-        future = Belief.from_array(np.asarray(base.beliefs(o.object_measurement, uncertainty))[1:])
-        variant = self._risk_variant() if self._risk_possible(x0, future) else "free"
-        pr = self._problem(variant)
-        data = self._risk_data(future)
-        p = np.concatenate(
-            [o.object_measurement, [self._epsilon], uncertainty, *(d.ravel(order="F") for d in data)]
-        )
-        lbx, ubx = variable_bounds(sc, pr.x_index, pr.u_index, pr.n_w, x0)
-        lbg = pr.lbg.copy()
-        lbg[pr.risk_rows] = self.backoff
-
-        # --- solve: warm start from the shifted plan; else, or on failure, cold from the rollouts.
-        # An episode's first step solves from every rollout (up to cold_starts) and keeps the best.
-        warm = mem is not None and mem.get("w") is not None
-        first = mem is None
-        iterations, status, ok, out, timings, t_solver = 0, "not solved", False, {}, {}, 0.0
-        best: tuple[dict[str, np.ndarray], str, dict[str, float]] | None = None
-        cold: list[np.ndarray] | None = None
-        planned = None if warm else self._pilot_plan(index, obs_vec, variant)
-        pilot = None
-        if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
-            inputs, iterations = planned
-            pilot = guesses.pack(pr, guesses.rollout(pr, x0, inputs), inputs)
-        for attempt in range(int(warm or pilot is not None) + self.cold_starts):
-            if warm and attempt == 0:
-                w0, lam_x, lam_g = self._warm_guess(pr, mem, x0)
-            elif pilot is not None and attempt == 0:
-                w0, lam_x, lam_g = pilot, None, None
-            else:
-                cold = guesses.cold_guesses(pr, sc, x0, p, lbg) if cold is None else cold
-                skip = int(warm or pilot is not None)
-                if attempt - skip >= len(cold):
-                    break
-                w0, lam_x, lam_g = cold[attempt - skip], None, None
-            args = {"x0": w0, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": pr.ubg, "p": p}
-            if lam_x is not None:
-                args.update(lam_x0=lam_x, lam_g0=lam_g)
-            t0 = time.perf_counter()
-            out, status, ok, iters, timings = self._call(pr, args)
-            t_solver += time.perf_counter() - t0
-            iterations += iters
-            if ok and (best is None or out["f"][0] < best[0]["f"][0]):
-                best = (out, status, timings)
-            if ok and (not first or (pilot is not None and attempt == 0)):
-                break
-        retried = best is not None and attempt > 0 and not first
-        ok = best is not None
-        if ok:
-            out, status, timings = best
-
-        # --- the plan, or the fallback
-        if ok:
-            w = np.clip(out["x"], lbx, ubx)
-            states, inputs = w[pr.x_index], w[pr.u_index]
-            action = feasible_action(sc, inputs[0, :2], x0[4:6])
-            fallback, cost = None, float(out["f"][0])
-            mem = {
-                "w": w,
-                "lam_x": out["lam_x"],
-                "lam_g": out["lam_g"],
-                "variant": variant,
-                "plan": inputs,
-                "used": 0,
-            }
-        else:
-            self.failures += 1
-            fallback, inputs, mem = fallback_plan(sc, x0, mem)
-            action = feasible_action(sc, inputs[0, :2], x0[4:6])
-            inputs = inputs.copy()
-            inputs[0, :2] = action
-            states = guesses.rollout(pr, x0, inputs)
-            cost = float("nan")
-        action = action.astype(np.float32)
-        mem["action"] = action
-        mem["predicted"] = states[1, :2].copy()
-        self._memory[index] = mem
-
-        ego_states = states[1:, [0, 1, 2, 4]]  # pose of state n with the speed v_{n-1} that led there
-        return SolveReport(
-            solve_time=time.perf_counter() - t_start,
-            success=ok,
-            status=status,
-            iterations=iterations,
-            fallback=fallback,
-            action=action,
-            ego_trajectory=states[:, :3].copy(),
-            inputs=inputs[:, :2].copy(),
-            path_speed=inputs[:, 2].copy(),
-            lambdas=states[:, 3].copy(),
-            risk_fn=functools.partial(self._risk_numpy, ego_states, future, data),
-            risk_tolerance=self._epsilon,
-            cost=cost,
-            retried=retried,
-            solver_time=t_solver,
-            variant=variant,
-            timings=timings,
-        )
+        """One step for the observation ``obs_vec`` (15,) of batch entry ``index``
+        (:class:`agents.step.Step`), within the wall-time cap."""
+        with Budget.open(self.max_solve_time) as budget:
+            return Step(self, index, obs_vec, budget).run()
 
     def _new_episode(self, mem: dict[str, Any], o: ob.Observation) -> bool:
         """The observation does not continue the episode this memory belongs to."""

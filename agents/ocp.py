@@ -32,7 +32,13 @@ The sections of :func:`assemble`, in order:
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
-  problem has the same solution, at a fraction of the cost.
+  problem has the same solution, at a fraction of the cost. ``"general_soft"`` and
+  ``"zero_soft"``: the risk rows softened, ``margin_n + s_n >= backoff`` with slacks ``s_n >= 0``
+  [margin units] and ``sum_n rho_n s_n`` added to the objective, ``rho_n = rho *``
+  :data:`EARLY_WEIGHT` ``**(N - n)`` (an exact L1 penalty: whenever every rho_n exceeds its risk
+  row's multiplier, every solution of the hard problem solves the soft one with s = 0, and a soft
+  solution with s = 0 solves the hard problem). The slack of row n is a
+  control of stage n (the last stage's after x_N), so the problem stays stage-wise for fatrop.
 
 The solver built on this NLP lives in :mod:`agents.solver`; the controller that calls it in
 :mod:`agents.mpc`.
@@ -56,24 +62,55 @@ from risk_env.prediction import Belief, predict
 from risk_env.scenario import Scenario
 
 STAGE_COSTS: tuple[str, ...] = ("reached", "paper")
-VARIANTS: tuple[str, ...] = ("general", "zero", "free")
+SOFT = "_soft"
+"""Suffix of the soft variants."""
+VARIANTS: tuple[str, ...] = ("general", "zero", "free", "general" + SOFT, "zero" + SOFT)
+EARLY_WEIGHT = 4.0
+"""A soft variant's slack of row n costs ``rho * EARLY_WEIGHT**(N - n)``: the earlier a violation,
+the dearer (near lexicographic: the plan keeps clear first at n = 1, then at n = 2, ...), since
+the object's early positions are the likely ones and the later boxes only grow."""
 NX = 6
 """Stage state: c1 [m], c2 [m], theta [rad], lambda [m], previous v [m/s], previous omega [rad/s]."""
 NU = 3
 """Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
 
+TERMS = 5
+"""Parameters of the risk terms (:mod:`agents.risk_budget`), at the end of p: the budget B, the risk
+spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
 Margin = Callable[[ca.SX, Belief, ca.SX, ca.SX, bool], ca.SX]
 """``(ego (4,), belief, epsilon, risk data, zero) -> margin``: >= 0 iff the step's risk bound holds."""
+RiskValue = Callable[[ca.SX, Belief, ca.SX], ca.SX]
+"""``(ego (4,), belief, risk data) -> R``: the agent's per-stage risk (the budget's and the cost's)."""
 Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
 """``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
 
 
+def risk_form(variant: str) -> str:
+    """The risk rows' form of a variant: ``"general"``, ``"zero"`` or ``"free"``."""
+    if variant not in VARIANTS:
+        raise ValueError(f"unknown NLP variant {variant!r}; expected one of {VARIANTS}")
+    return variant.removesuffix(SOFT)
+
+
+def soft_variant(variant: str) -> str:
+    """The soft variant of a hard one with risk rows (``"general"`` -> ``"general_soft"``)."""
+    form = risk_form(variant)
+    if form == "free":
+        raise ValueError("the free variant has no risk rows to soften")
+    return form + SOFT
+
+
 def stage_functions(
-    scenario: Scenario, variant: str, margin: Margin, risk_shape: tuple[int, int]
+    scenario: Scenario,
+    variant: str,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
 ) -> dict[str, ca.Function | None]:
     """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, and ``risk`` (ego, belief, epsilon, data) -> margin
-    (None for ``"free"``)."""
+    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, belief, epsilon, data) -> margin
+    (None for ``"free"``) and, with ``value``, ``risk_value`` (ego, belief, data) -> R (None for
+    ``"free"`` or without ``value``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
     w_c1, w_c2, w_th, _ = sc.cost_weights
@@ -84,15 +121,22 @@ def stage_functions(
     e1, e2, e3, _ = path_error(path, x[0], x[1], x[2], 0.0, x[3], ego.v_ref, CASADI, wrap=False)
     pose_cost = ca.Function("pose_cost", [x], [w_c1 * e1**2 + w_c2 * e2**2 + w_th * e3**2])
     risk = None
-    if variant != "free":
+    form = risk_form(variant)
+    if form != "free":
         ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
         eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *risk_shape)
-        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, variant == "zero")
+        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, form == "zero")
         # only the ego state is a variable: no derivatives for the rest (compiled code: less)
         risk = ca.Function(
             "risk", [ego_s, belief_s, eps_s, data_s], [row], {"is_diff_in": [True, False, False, False]}
         )
-    return {"f": f, "pose_cost": pose_cost, "risk": risk}
+    risk_value = None
+    if form != "free" and value is not None:
+        r = value(ego_s, Belief.from_array(belief_s), data_s)
+        risk_value = ca.Function(
+            "risk_value", [ego_s, belief_s, data_s], [r], {"is_diff_in": [True, False, False]}
+        )
+    return {"f": f, "pose_cost": pose_cost, "risk": risk, "risk_value": risk_value}
 
 
 def assemble(
@@ -101,10 +145,15 @@ def assemble(
     stages: dict[str, ca.Function | None],
     risk_shape: tuple[int, int],
     stage_cost: str,
+    soft_penalty: float | None = None,
+    terms: tuple[bool, bool] = (False, False),
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
     called), its :data:`Layout` and the beliefs' function (object measurement (5,), uncertainty
-    numbers) -> ``(N+1, Belief.SIZE)``."""
+    numbers) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho: soften the risk rows with slacks
+    (tagged ``(n, "s", 0)``) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight):
+    the :data:`TERMS` parameters at the end of p, and (with a ``risk_value`` stage function) the
+    episode budget's accumulator and row, the weighted risk in the objective (see the module)."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
@@ -117,7 +166,9 @@ def assemble(
     p_eps = sym.sym("epsilon")
     p_unc = sym.sym("uncertainty", len(uncertainty_vector(sc)))
     p_data = [sym.sym(f"risk_data_{n}", *risk_shape) for n in range(1, N + 1)]
-    p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
+    with_terms = any(terms)
+    p_terms = sym.sym("risk_terms", TERMS) if with_terms else None
+    p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data), *([p_terms] if with_terms else []))
     beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(p_unc))
     fields = [f.name for f in dataclasses.fields(Belief)]
     stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
@@ -126,6 +177,13 @@ def assemble(
     # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
     X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
     U = [sym.sym(f"u_{n}", NU) for n in range(N)]
+    soft = soft_penalty is not None and risk is not None
+    S = {n: sym.sym(f"s_{n}") for n in range(1, N + 1)} if soft else {}
+    value = stages.get("risk_value")
+    budget = terms[0] and value is not None
+    weight = p_terms[4] if terms[1] and value is not None else None
+    C = {n: sym.sym(f"c_{n}") for n in range(1, N + 1)} if budget else {}  # sum of R_1..R_{n-1}
+    s_budget = sym.sym("s_budget") if budget and soft else None
     w: list[Any] = []
     w_tags: list[tuple[int, str, int]] = []
     g: list[Any] = []
@@ -140,38 +198,82 @@ def assemble(
             lbg.append(lo)
             ubg.append(hi)
 
-    def add_risk(n: int) -> None:
+    def ego_at(n: int) -> Any:
+        return ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
+
+    values = {}
+    if C or weight is not None:
+        values = {n: value(ego_at(n), stacked[n], p_data[n - 1]) for n in range(1, N + 1)}
+
+    def add_risk(n: int) -> Any:
+        """The risk row of state n (its slack added in a soft variant), at n = N the budget row;
+        their cost terms."""
         if risk is None:
-            return
-        ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-        add_g(risk(ego_n, stacked[n], p_eps, p_data[n - 1]), 0.0, math.inf, n, "risk")
+            return 0.0
+        row = risk(ego_at(n), stacked[n], p_eps, p_data[n - 1])
+        cost = 0.0 if weight is None else weight * values[n]
+        if soft:
+            row = row + S[n]
+            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * S[n]
+        add_g(row, 0.0, math.inf, n, "risk")
+        if C and n == N:  # (B - spent - sum_n R_n) * normaliser + switch-off >= backoff
+            left = (p_terms[0] - p_terms[1] - C[N] - values[N]) * p_terms[2] + p_terms[3]
+            add_g(left + s_budget if soft else left, 0.0, math.inf, N, "risk")
+            cost += soft_penalty * s_budget if soft else 0.0
+        return cost
+
+    def add_slack(n: int) -> None:
+        """The slack of row n, a control of stage n (after u_n; after x_N for n = N; the budget
+        row's after that)."""
+        if n in S:
+            w.append(S[n])
+            w_tags.append((n, "s", 0))
+        if n == N and s_budget is not None:
+            w.append(s_budget)
+            w_tags.append((N, "s", 1))
+
+    def add_accumulator(n: int) -> None:
+        """c_{n+1} = c_n + R_n (c_1 = 0), the gap row's last component: stage-local."""
+        if C and n < N:
+            add_g(C[n + 1] - (C[n] + values[n] if n >= 1 else 0.0), 0.0, 0.0, n, "accumulate")
 
     # --- objective, dynamics, rate limits and risk, stage-wise
     cost = 0.0
     for n in range(N):
-        w += [X[n], U[n]]
-        w_tags += [(n, "x", i) for i in range(NX)] + [(n, "u", i) for i in range(NU)]
+        w += [X[n], *([C[n]] if n in C else []), U[n]]
+        w_tags += [(n, "x", i) for i in range(NX)] + ([(n, "c", 0)] if n in C else [])
+        w_tags += [(n, "u", i) for i in range(NU)]
+        add_slack(n)
         add_g(X[n + 1] - f(X[n], U[n]), 0.0, 0.0, n, "gap")
+        add_accumulator(n)
         add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
-            add_risk(n)
+            cost += add_risk(n)
         cost += w_v * (U[n][2] - ego.v_ref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
-    w.append(X[N])
-    w_tags += [(N, "x", i) for i in range(NX)]
-    add_risk(N)
+    w += [X[N], *([C[N]] if C else [])]
+    w_tags += [(N, "x", i) for i in range(NX)] + ([(N, "c", 0)] if C else [])
+    add_slack(N)
+    cost += add_risk(N)
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
     return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
 
 
 def variable_bounds(
-    scenario: Scenario, x_index: np.ndarray, u_index: np.ndarray, n_w: int, x0: np.ndarray
+    scenario: Scenario,
+    x_index: np.ndarray,
+    u_index: np.ndarray,
+    n_w: int,
+    x0: np.ndarray,
+    slack_index: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(lbx, ubx)`` of w ``(n_w,)``: x_0 fixed to the measurement, lambda_n >= the path's start,
-    the input bounds."""
+    the input bounds, slacks (at ``slack_index``) >= 0."""
     ego = scenario.ego
     lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
+    if slack_index is not None:
+        lbx[slack_index] = 0.0
     lbx[x_index[0]] = ubx[x_index[0]] = x0
     lbx[x_index[1:, 3]] = min(scenario.path.lambda_start, x0[3])
     lbx[u_index] = (ego.v_min, -ego.omega_max, ego.v_min)

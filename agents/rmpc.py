@@ -25,7 +25,8 @@ class RMPC(PathFollowingMPC):
     (L = ``grid_points`` or the scenario's). Both are piecewise smooth (``fmax``); IPOPT copes.
 
     See :class:`agents.mpc.PathFollowingMPC` for the problem, the solver options and the fallback
-    (shifted previous plan, then braking; counted in :attr:`failures`, never raised).
+    (the soft problem, then the safest rate-limited manoeuvre; counted in :attr:`failures`, never
+    raised) within the step's wall-time cap ``max_solve_time``.
 
     >>> from risk_env import Scenario
     >>> agent = RMPC(Scenario.preset("low"))            # doctest: +SKIP
@@ -37,6 +38,13 @@ class RMPC(PathFollowingMPC):
     def __init__(
         self, scenario: Scenario, risk: str = "worst_case", grid_points: int | None = None, **kwargs: Any
     ) -> None:
+        for name in ("risk_budget", "risk_weight"):
+            if kwargs.get(name) is not None:
+                raise ValueError(
+                    f"{name}={kwargs[name]!r} given to the RMPC: its worst-case risk carries no"
+                    " probability, so it has no expectation to budget or weigh (use the SMPC)"
+                )
+            kwargs.pop(name, None)
         if risk not in self.RISK_METHODS:
             raise ValueError(f"unknown RMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
         self.risk_method = risk

@@ -1,4 +1,4 @@
-"""Building the MPC's solver from the NLP of :mod:`agents.ocp`: options, compilation and caches.
+"""Building the MPC's solver from the NLP of :mod:`agents.ocp`: options, rungs, caches.
 
 Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
 Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
@@ -13,7 +13,14 @@ functions (dynamics, pose cost, risk row) called rather than inlined, its functi
 the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGenerator`, compiled by
 ``$CC`` (gcc) at ``-O{jit_opt}`` into a shared library in a private temporary directory and kept in
 ``jit_cache`` under a hash of the NLP, so later processes load it; nlpsol then runs from the
-library. Nothing is written to the working directory and the process never changes directory.
+library (:mod:`agents.compiled`). Nothing is written to the working directory and the process never
+changes directory.
+
+**Rungs** (:meth:`SolverSettings.rung_limits`): each NLP is built with a few solvers that differ
+only in their limits (fatrop: ``max_iter``, halved per rung; IPOPT: ``max_wall_time``, halved per
+rung), so that a call can be made to fit the time left in a step (:mod:`agents.budget`). The
+smallest rung is built first and run on the scenario's start: its time per iteration is the prior
+of the budget's estimate, and fatrop rungs that could never fit twice the step's cap are left out.
 
 **Caches**: built problems are kept per process (:func:`cached_problem`, keyed by everything that
 changes the NLP or the solver), compiled libraries on disk.
@@ -21,14 +28,8 @@ changes the NLP or the solver), compiled libraries on disk.
 
 from __future__ import annotations
 
-import atexit
-import functools
-import hashlib
+import math
 import os
-import shlex
-import shutil
-import subprocess
-import tempfile
 import time
 import warnings
 from collections import OrderedDict
@@ -39,26 +40,31 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from agents.ocp import NU, NX, STAGE_COSTS, Margin, assemble, stage_functions
+from agents.budget import CallTimes
+from agents.compiled import DEFAULT_JIT_CACHE, compiled_library, have_c_compiler
+from agents.ocp import (
+    EARLY_WEIGHT,
+    NU,
+    NX,
+    SOFT,
+    STAGE_COSTS,
+    Margin,
+    RiskValue,
+    assemble,
+    stage_functions,
+    uncertainty_vector,
+    variable_bounds,
+)
+from risk_env.path import project
 from risk_env.scenario import Scenario
 
 SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
 IPOPT_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-DEFAULT_JIT_CACHE = os.environ.get(
-    "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
-)
-"""Where compiled solvers (shared libraries) are kept between processes."""
-_COMPILED_FUNCTIONS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l", "nlp_grad")
-"""The nlpsol functions a compiled solver takes from its shared library (the rest are derived)."""
+USEFUL_RUNG = 2.0
+"""A fatrop rung is built when its iterations at the prior time per iteration take at most this
+many step caps (a larger one could never fit the time left in a step)."""
 _CACHE_SIZE = 48
 _SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
-
-
-def have_c_compiler() -> bool:
-    """Whether the C compiler for compiled solvers (``$CC``, e.g. ``"ccache gcc"``, or ``gcc``) can
-    be found."""
-    command = shlex.split(os.environ.get("CC", "gcc"))
-    return bool(command) and shutil.which(command[0]) is not None
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,15 @@ class SolverSettings:
     max_iter: int = 150
     warm_start: bool = True
     solver_options: dict[str, Any] = field(default_factory=dict)
+    time_limit: float | None = None
+    """The wall-time cap of a step [s] (None: none): IPOPT's own ``max_wall_time`` at the largest
+    rung; for fatrop (no time limit) it decides which rungs are worth building."""
+    rungs: int = 1
+    """Rungs of the ladder: rung r limits a call to ``max_iter // 2**r`` iterations (fatrop) or
+    ``time_limit / 2**r`` seconds (IPOPT), so that a call fits the time left in a step."""
+    soft_penalty: float = 1e4
+    """rho of the soft variants' exact L1 penalty ``sum_n rho * EARLY_WEIGHT**(N - n) s_n`` [cost
+    per margin unit] (:mod:`agents.ocp`)."""
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -85,6 +100,16 @@ class SolverSettings:
         if not (isinstance(self.tol, (int, float)) and self.tol > 0):
             raise ValueError(f"tol must be > 0, got {self.tol!r}")
         object.__setattr__(self, "tol", float(self.tol))
+        if isinstance(self.rungs, bool) or not isinstance(self.rungs, int) or self.rungs < 1:
+            raise ValueError(f"rungs must be an integer >= 1, got {self.rungs!r}")
+        if self.time_limit is not None and not (
+            isinstance(self.time_limit, (int, float)) and self.time_limit > 0
+        ):
+            raise ValueError(f"time_limit must be > 0 [s] (or None), got {self.time_limit!r}")
+        if not (isinstance(self.soft_penalty, (int, float)) and math.isfinite(self.soft_penalty)):
+            raise ValueError(f"soft_penalty must be a finite number > 0, got {self.soft_penalty!r}")
+        if self.soft_penalty <= 0:
+            raise ValueError(f"soft_penalty must be > 0, got {self.soft_penalty!r}")
 
     def key(self) -> tuple[Any, ...]:
         """What of the settings changes a built solver (not where compiled code is kept)."""
@@ -98,10 +123,23 @@ class SolverSettings:
             self.max_iter,
             self.warm_start,
             options,
+            self.time_limit,
+            self.rungs,
+            self.soft_penalty,
         )
 
-    def plugin_options(self) -> dict[str, Any]:
-        """The nlpsol plugin's options (IPOPT's or fatrop's), the user's on top."""
+    def rung_limits(self) -> tuple[tuple[int, float | None], ...]:
+        """``(max_iter, max_wall_time [s] or None)`` of each rung, the largest first."""
+        out = []
+        for r in range(self.rungs):
+            iterations = max(1, self.max_iter >> r) if self.solver == "fatrop" else self.max_iter
+            wall = None if self.time_limit is None or self.solver != "ipopt" else self.time_limit / 2**r
+            out.append((iterations, wall))
+        return tuple(out)
+
+    def plugin_options(self, rung: int = 0) -> dict[str, Any]:
+        """The nlpsol plugin's options (IPOPT's or fatrop's) at ``rung``, the user's on top."""
+        max_iter, wall = self.rung_limits()[rung]
         extra = {k: v for k, v in self.solver_options.items() if k not in SOLVERS}
         if self.solver == "ipopt":
             ipopt = {
@@ -112,7 +150,7 @@ class SolverSettings:
                 "acceptable_tol": max(1e-3, 10 * self.tol),
                 "acceptable_constr_viol_tol": 1e-5,
                 "acceptable_iter": 5,
-                "max_iter": self.max_iter,
+                "max_iter": max_iter,
                 "mu_strategy": "adaptive",
                 "hessian_approximation": "exact",
             }
@@ -123,6 +161,8 @@ class SolverSettings:
                     warm_start_mult_bound_push=1e-6,
                     mu_init=1e-3,
                 )
+            if wall is not None:
+                ipopt["max_wall_time"] = wall
             ipopt.update(self.solver_options.get("ipopt", {}))
             return {"ipopt": ipopt, **extra}
         # CasADi 3.8's fatrop takes a primal initial guess only (no warm_start_* options); a small
@@ -131,7 +171,7 @@ class SolverSettings:
             "print_level": 0,
             "tol": self.tol,
             "constr_viol_tol": 1e-6,
-            "max_iter": self.max_iter,
+            "max_iter": max_iter,
             "mu_init": 1e-3 if self.warm_start else 1e-1,
             "bound_push": 1e-6 if self.warm_start else 1e-2,
             "bound_frac": 1e-6 if self.warm_start else 1e-2,
@@ -145,7 +185,10 @@ class Problem:
     """One built NLP variant: the solver, an evaluator and the index maps of its layout."""
 
     variant: str
-    solver: ca.Function
+    solvers: tuple[ca.Function, ...]
+    """The solver at each rung of :meth:`SolverSettings.rung_limits`, the largest first."""
+    limits: tuple[tuple[int, float | None], ...]
+    """``(max_iter, max_wall_time [s] or None)`` of each rung."""
     evaluate: ca.Function
     """(w, p) -> (objective, g): scores initial-guess candidates."""
     rollout: ca.Function
@@ -160,6 +203,11 @@ class Problem:
     """(N, NU) positions of the inputs in w."""
     risk_rows: np.ndarray
     """Rows of g holding margin_n, n = 1..N (empty for ``"free"``)."""
+    slack_index: np.ndarray
+    """Positions of the slacks s_n, n = 1..N, in w (empty for hard variants)."""
+    slack_costs: np.ndarray
+    """rho_n, the cost of each slack s_n, in the order of :attr:`slack_index` (empty for hard
+    variants)."""
     w_tags: tuple[tuple[int, str, int], ...]
     """(stage, kind, component) of every entry of w."""
     shift_w: np.ndarray
@@ -170,10 +218,25 @@ class Problem:
     """Seconds to build (and with jit compile) the solver."""
     jit: bool
     """Whether the solver's functions were compiled."""
+    times: CallTimes
+    """The rungs' limits and the measured time per iteration (shared by the cached copies)."""
+    acc_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
+    acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Rows of g of c_{n+1} = c_n + R_n, n = 0..N-1 (empty without a budget)."""
 
     @property
     def n_w(self) -> int:
         return len(self.w_tags)
+
+    @property
+    def solver(self) -> ca.Function:
+        """The largest rung's solver."""
+        return self.solvers[0]
+
+    @property
+    def soft(self) -> bool:
+        return self.variant.endswith(SOFT)
 
 
 def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Problem:
@@ -190,114 +253,153 @@ def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Proble
 
 
 def build_problem(
-    scenario: Scenario, variant: str, settings: SolverSettings, margin: Margin, risk_shape: tuple[int, int]
+    scenario: Scenario,
+    variant: str,
+    settings: SolverSettings,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
+    terms: tuple[bool, bool] = (False, False),
 ) -> Problem:
     """Build the NLP of :mod:`agents.ocp` for ``variant`` and its solver (compiled with
-    ``settings.jit`` where a C compiler works)."""
+    ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the risk budget and weight
+    (:func:`agents.ocp.assemble`)."""
     t0 = time.perf_counter()
     N = scenario.horizon
-    stages = stage_functions(scenario, variant, margin, risk_shape)
+    stages = stage_functions(scenario, variant, margin, risk_shape, value)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
+    penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms
     )
 
-    options: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
-    options.update(settings.plugin_options())
+    base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
     if settings.solver == "fatrop":
-        options["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
+        base["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
     jit = settings.jit and have_c_compiler()
     if settings.jit and not jit:
         warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=5)
-    solver = ca.nlpsol("mpc", settings.solver, nlp, options)
+    oracle: Any = nlp
     if jit:
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
-        # code holds the risk row and its derivatives once instead of N times
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost)
-        compiled = compiled_solver(calls, {**options, "expand": False}, settings)
-        jit = compiled is not None
-        solver = compiled if jit else solver
+        # code holds the risk row and its derivatives once instead of N times; every rung loads
+        # the one library, whose compiled "nlp" leaves nothing to expand
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms)
+        base["expand"] = False
+        library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
+        jit = library is not None
+        oracle = library if jit else nlp
+        base["expand"] = not jit
 
+    derivatives: dict[str, ca.Function] = {}
+
+    def make(rung: int) -> ca.Function:
+        solver = ca.nlpsol(
+            "mpc", settings.solver, oracle, {**base, **derivatives, **settings.plugin_options(rung)}
+        )
+        if settings.solver == "ipopt" and not jit and not derivatives:  # IPOPT's rungs share them
+            names = {"grad_f": "nlp_grad_f", "jac_g": "nlp_jac_g", "hess_lag": "nlp_hess_l"}
+            derivatives.update({k: solver.get_function(v) for k, v in names.items()})
+        return solver
+
+    # the smallest rung first: its time per iteration on the scenario's start is the prior, which
+    # leaves out the larger fatrop rungs that could never fit in the cap
+    ladder = settings.rung_limits()
+    smallest = make(len(ladder) - 1)
     index = {tag: i for i, tag in enumerate(w_tags)}
+    x_index = np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)])
+    u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
+    prior, failing = iteration_times(smallest, scenario, x_index, u_index, lbg, ubg, risk_shape)
+    cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
+    rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
+    solvers = [make(r) for r in rungs] + [smallest]
+    limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
+
     return Problem(
         variant=variant,
-        solver=solver,
+        solvers=tuple(solvers),
+        limits=limits,
         evaluate=ca.Function("evaluate", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]),
         rollout=stages["f"].mapaccum(N),
         beliefs=belief_fn,
         lbg=np.array(lbg),
         ubg=np.array(ubg),
-        x_index=np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)]),
-        u_index=np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)]),
+        x_index=x_index,
+        u_index=u_index,
         risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+        slack_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int),
+        slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
         w_tags=tuple(w_tags),
         shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
         g_tags=tuple(g_tags),
         build_time=time.perf_counter() - t0,
         jit=jit,
+        times=CallTimes(limits, prior, failing),
+        acc_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "c"], dtype=int),
+        acc_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "accumulate"], dtype=int),
     )
 
 
-def compiled_solver(
-    nlp: dict[str, Any], options: dict[str, Any], settings: SolverSettings
-) -> ca.Function | None:
-    """The solver of ``nlp`` with its functions (the NLP and the derivatives the solver evaluates)
-    compiled into a shared library, loaded from the disk cache when it holds this exact NLP.
+def iteration_time(
+    solver: ca.Function,
+    scenario: Scenario,
+    x_index: np.ndarray,
+    u_index: np.ndarray,
+    lbg: list[float],
+    ubg: list[float],
+    risk_shape: tuple[int, int],
+    repeats: int = 2,
+) -> float:
+    """The time of one solver iteration [s] on the scenario's start (its object, epsilon and
+    uncertainty; zero risk data) from rest: the fastest of ``repeats`` calls (the first also pays
+    one-time set-up)."""
+    N, n_w = scenario.horizon, solver.size_in("x0")[0]
+    x, y, theta = scenario.ego.start.as_tuple()
+    x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
+    obj = scenario.object
+    p = np.concatenate(
+        [
+            [*obj.start.as_tuple(), obj.speed, obj.turn_rate, scenario.risk_tolerance],
+            uncertainty_vector(scenario),
+            np.zeros(N * risk_shape[0] * risk_shape[1]),
+        ]
+    )
+    p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
+    lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0)
+    w0 = np.zeros(n_w)
+    w0[x_index] = x0
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        with np.errstate(all="ignore"):
+            solver(x0=w0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
+        iterations = int(solver.stats().get("iter_count", 0))
+        if iterations > 0:
+            best = min(best, (time.perf_counter() - t0) / iterations)
+    return best if math.isfinite(best) else 1e-3
 
-    The library is generated with :class:`casadi.CodeGenerator` and compiled by ``$CC`` (or gcc) at
-    ``-O{jit_opt}`` in a private temporary directory, then moved into ``jit_cache`` under a hash of
-    the NLP, the CasADi version and the compiler flags, so any later process (or agent) with the same
-    NLP loads it in milliseconds. Nothing is written to the working directory and the process never
-    changes directory. (CasADi's own ``jit`` option cannot promise that: in CasADi 3.8 nlpsol's jit
-    writes its C source to the working directory whatever ``jit_options["directory"]`` says.)
-    Returns None (with a warning) when code generation, compilation or loading fails.
-    """
-    oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
-    solver = ca.nlpsol("mpc", settings.solver, oracle, options)  # for its derivative functions
-    names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
-    compiler = os.environ.get("CC", "gcc")
-    flags = [f"-O{settings.jit_opt}"]
-    key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
-    digest = hashlib.sha256("\n".join(key).encode()).hexdigest()[:24]
-    name = f"riskmpc_{digest}"
-    cache = _private_cache() if settings.jit_cache is None else os.fspath(settings.jit_cache)
-    library = os.path.join(cache, f"{name}.so")
-    try:
-        if not os.path.exists(library):
-            os.makedirs(cache, exist_ok=True)
-            with tempfile.TemporaryDirectory(prefix="riskmpc_build_") as tmp:
-                generator = ca.CodeGenerator(name, {"with_header": False})
-                generator.add(oracle)
-                for n in names:
-                    generator.add(solver.get_function(n))
-                source = generator.generate(tmp + os.sep)
-                built = os.path.join(tmp, f"{name}.so")
-                subprocess.run(
-                    [*shlex.split(compiler), "-fPIC", "-shared", *flags, source, "-o", built],
-                    cwd=tmp,
-                    check=True,
-                    capture_output=True,
-                )
-                partial = f"{library}.{os.getpid()}.tmp"
-                shutil.move(built, partial)
-                os.replace(partial, library)  # atomic: no process loads a half-written library
-        # the oracle is the library's compiled "nlp": nothing left to expand
-        loaded = {k: v for k, v in options.items() if k != "expand"}
-        return ca.nlpsol("mpc", settings.solver, library, loaded)
-    except Exception as err:  # a broken compiler must not break the agent
-        detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]
-        warnings.warn(f"compiling the solver failed ({err} {detail}); building without jit", stacklevel=6)
-        return None
+
+def iteration_times(solver: ca.Function, scenario: Scenario, *layout: Any) -> tuple[float, float]:
+    """The priors of :class:`agents.budget.CallTimes`: the time per iteration [s] of ``solver``
+    on the scenario's start, and on the same start with a parked object 1 m ahead of the ego,
+    inside its boxes at every step (a failing call's, whose line searches evaluate more)."""
+    x, y, theta = scenario.ego.start.as_tuple()
+    swallowed = scenario.replace(
+        object_start=(x + math.cos(theta), y + math.sin(theta), theta), object_speed=0.0, object_turn_rate=0.0
+    )
+    return iteration_time(solver, scenario, *layout), iteration_time(solver, swallowed, *layout)
 
 
 def call_solver(
-    problem: Problem, args: dict[str, Any], solver: str
+    problem: Problem, args: dict[str, Any], solver: str, rung: int = 0
 ) -> tuple[dict[str, np.ndarray], str, bool, int, dict[str, float]]:
-    """One solver call: ``(outputs, status, success, iterations, wall times)``; never raises."""
+    """One solver call at ``rung``: ``(outputs, status, success, iterations, wall times)``; never
+    raises."""
+    function = problem.solvers[rung]
     try:
         with np.errstate(all="ignore"):
-            res = problem.solver(**args)
-        stats = problem.solver.stats()
+            res = function(**args)
+        stats = function.stats()
     except Exception as err:  # never raise inside an episode
         return {}, f"exception: {err}", False, 0, {}
     out = {k: np.asarray(v).ravel() for k, v in res.items()}
@@ -310,11 +412,3 @@ def call_solver(
     ok = ok and all(np.all(np.isfinite(out[k])) for k in ("x", "lam_x", "lam_g", "f"))
     times = {k: float(v) for k, v in stats.items() if k.startswith("t_wall_") and v}
     return out, status, ok, int(stats.get("iter_count", 0)), times
-
-
-@functools.cache
-def _private_cache() -> str:
-    """A per-process directory for compiled solvers when ``jit_cache=None`` (removed at exit)."""
-    path = tempfile.mkdtemp(prefix="riskmpc_jit_")
-    atexit.register(shutil.rmtree, path, ignore_errors=True)
-    return path

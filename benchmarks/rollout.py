@@ -64,7 +64,9 @@ class EpisodeRecord:
     solve_time: np.ndarray
     """(steps,) agent's solve (or predict) time [s]."""
     fallback: np.ndarray
-    """(steps,) whether the agent's solver failed and it fell back."""
+    """(steps,) whether the agent's hard problem failed and a fallback level acted."""
+    fallback_kind: np.ndarray
+    """(steps,) which fallback level acted (``agents.FALLBACK_KINDS``), "" where none did."""
     collision: bool
     success: bool
     epsilon: float
@@ -93,7 +95,12 @@ class EpisodeRecord:
 
     @property
     def failures(self) -> int:
+        """Steps where a fallback level acted (the hard problem gave no plan)."""
         return int(self.fallback.sum())
+
+    def fallbacks(self, kind: str) -> int:
+        """Steps where the fallback level ``kind`` (e.g. ``"soft"``, ``"manoeuvre"``) acted."""
+        return int(np.sum(self.fallback_kind == kind))
 
     @property
     def violation_rate(self) -> float:
@@ -108,7 +115,7 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         agent.reset()
     ego, obj, objects, terms = [info["ego"]], [info["object"]], [info["objects"]], []
     errors, dist = [info["path_error"]], [info["distance"]]
-    actions, risks, times, fallbacks, reports = [], [], [], [], []
+    actions, risks, times, kinds, reports = [], [], [], [], []
     state, start = None, True
     terminated = truncated = False
     while not (terminated or truncated):
@@ -119,7 +126,7 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         report = getattr(agent, "last_solve", None)
         reports.append(report)
         times.append(getattr(report, "solve_time", elapsed) if report is not None else elapsed)
-        fallbacks.append(bool(getattr(report, "fallback", False)) if report is not None else False)
+        kinds.append(str(getattr(report, "fallback", None) or ""))
         obs, _, terminated, truncated, info = env.step(action)
         actions.append(np.asarray(action, dtype=float).reshape(2))
         risks.append(info["risk"])
@@ -137,7 +144,8 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         path_error=np.array(errors),
         distance=np.array(dist),
         solve_time=np.array(times),
-        fallback=np.array(fallbacks, dtype=bool),
+        fallback=np.array([k != "" for k in kinds], dtype=bool),
+        fallback_kind=np.array(kinds, dtype=object),
         collision=bool(info.get("collision", False)),
         success=bool(info.get("is_success", False)),
         epsilon=float(env.unwrapped.scenario.risk_tolerance),

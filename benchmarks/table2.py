@@ -51,6 +51,8 @@ CSV_COLUMNS = (
     "wall_s",
     "paper_e_acc",
     "paper_d_min",
+    "fallback_soft",
+    "fallback_manoeuvre",
 )
 
 
@@ -119,6 +121,8 @@ def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         "wall_s": round(time.perf_counter() - t0, 3),
         "paper_e_acc": paper[0],
         "paper_d_min": paper[1],
+        "fallback_soft": record.fallbacks("soft"),
+        "fallback_manoeuvre": record.fallbacks("manoeuvre"),
     }
     arrays = {"ego": record.ego, "object": record.object, "actions": record.actions, "risk": record.risk}
     if record.objects.shape[1] > 1:  # several objects: each one's states and risk terms
@@ -273,7 +277,8 @@ def markdown(
         lines.append(f"- {claim}: {verdict} ({evidence})")
     lines += ["<!-- --8<-- [end:claims] -->", "", "## Timing", "", "<!-- --8<-- [start:timing] -->"]
     lines.append(
-        "| method | risk | runs | wall [s] | solve median [ms] | solve p95 [ms] | solve max [ms] | failed |"
+        "| method | risk | runs | wall [s] | solve median [ms] | solve p95 [ms] | solve max [ms] |"
+        " fallbacks (soft / manoeuvre) |"
     )
     lines.append("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for method, risk in groups:
@@ -282,7 +287,8 @@ def markdown(
             f"| {method} | {risk} | {len(sel)} | {wall.get(f'{method}:{risk}', float('nan')):.1f} | "
             f"{np.median([r['solve_ms_median'] for r in sel]):.1f} | "
             f"{max(r['solve_ms_p95'] for r in sel):.1f} | "
-            f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)} |"
+            f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)}"
+            f" ({sum(r['fallback_soft'] for r in sel)} / {sum(r['fallback_manoeuvre'] for r in sel)}) |"
         )
     lines.append("<!-- --8<-- [end:timing] -->")
     return "\n".join(lines) + "\n"

@@ -7,16 +7,23 @@ estimators (:func:`risk_env.make_estimator`) on :func:`risk_env.predict_array` b
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import risk_env  # noqa: F401  (registers RiskCrossing-v0)
-from agents import RMPC, SMPC, Policy, SolveReport
+from agents import RMPC, SMPC, Policy, SolveReport, fallback, guesses
+from agents.budget import Budget, CallTimes
+from agents.solver import SolverSettings
 from risk_env import Scenario, make_estimator, predict_array
 from risk_env import observation as ob
 from risk_env.risk import signed_box_distance
 
+UNCAPPED = math.inf
+"""``max_solve_time`` of tests about the plans themselves: no wall-time cap, so a busy machine
+cannot turn a slow solve into a fallback."""
 RISK_TOLERANCE_J = 1.0
 """Slack [J] on the exact risk of a converged plan (solver tolerance 1e-6 on risk/1000 J, plus
 the back-off that keeps it 0.1 J inside)."""
@@ -80,9 +87,9 @@ def closed_loop(agent, env: gym.Env, steps: int) -> dict[str, np.ndarray]:
     [
         (lambda sc: RMPC(sc), "worst_case", 0.0),
         (lambda sc: SMPC(sc), "exact", 0.0),
-        (lambda sc: SMPC(sc), "exact", 500.0),
-        (lambda sc: SMPC(sc, solver="ipopt"), "exact", 1000.0),
-        (lambda sc: RMPC(sc, stage_cost="paper", solver="ipopt"), "worst_case", 0.0),
+        (lambda sc: SMPC(sc, max_solve_time=UNCAPPED), "exact", 500.0),
+        (lambda sc: SMPC(sc, solver="ipopt", max_solve_time=UNCAPPED), "exact", 1000.0),
+        (lambda sc: RMPC(sc, stage_cost="paper", solver="ipopt", max_solve_time=UNCAPPED), "worst_case", 0.0),
     ],
     ids=["rmpc", "smpc-exact-0", "smpc-exact-500", "smpc-exact-1000-ipopt", "rmpc-paper-cost-ipopt"],
 )
@@ -110,7 +117,7 @@ def test_monte_carlo_plan_respects_its_own_draws() -> None:
     """The plan's Monte Carlo risk on the solve's draws (hard indicator) stays within epsilon, up to
     the smoothed form's stated bound (draws near the disc edge, the rounded severity)."""
     scenario = Scenario.preset("medium", risk_tolerance=1000.0)
-    agent = SMPC(scenario, risk="monte_carlo", samples=200, seed=3)
+    agent = SMPC(scenario, risk="monte_carlo", samples=200, seed=3, max_solve_time=UNCAPPED)
     obs = start_observation(scenario)
     agent.predict(obs)
     report = agent.last_solve
@@ -155,7 +162,7 @@ def test_exact_smpc_at_zero_tolerance_drives_like_the_rmpc() -> None:
     assert len(smpc["ego"]) == len(rmpc["ego"]) == 16
     np.testing.assert_allclose(smpc["ego"], rmpc["ego"], atol=1e-3)
     # ... and it differs from an SMPC that tolerates risk
-    loose = closed_loop(SMPC.from_env(env, risk_tolerance=1000.0), env, 15)
+    loose = closed_loop(SMPC.from_env(env, risk_tolerance=1000.0, max_solve_time=UNCAPPED), env, 15)
     assert np.max(np.abs(loose["ego"] - rmpc["ego"])) > 0.5
 
 
@@ -175,7 +182,7 @@ def test_smpc_keeps_the_envs_risk_within_tolerance() -> None:
     """With the deterministic object, the env's R_{k+1|k} is the plan's first-step risk."""
     epsilon = 500.0
     env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=epsilon)
-    agent = SMPC.from_env(env)
+    agent = SMPC.from_env(env, max_solve_time=UNCAPPED)
     run = closed_loop(agent, env, 20)
     assert agent.failures == 0
     assert np.all(run["risk"] <= epsilon + RISK_TOLERANCE_J), run["risk"]
@@ -183,48 +190,227 @@ def test_smpc_keeps_the_envs_risk_within_tolerance() -> None:
     assert run["plan_risk"].max() > 0.5 * epsilon  # the tolerance is used by the plans
 
 
-# ----------------------------------------------------------------------------- fallback
-def test_fallback_brakes_when_the_ego_starts_inside_the_box() -> None:
-    scenario = Scenario.preset("low")
-    agent = RMPC(scenario)
+# ----------------------------------------------------------------------------- degradation
+def box_clearance(scenario: Scenario, obs: np.ndarray, ego_trajectory: np.ndarray) -> np.ndarray:
+    """Worst-case clearance [m] of a plan's states n = 1..N: distance to the truncation box - 3 m."""
+    beliefs = predict_array(scenario, ob.split(obs).object_measurement)[1:]
+    x, y = ego_trajectory[1:, 0], ego_trajectory[1:, 1]
+    distance = signed_box_distance(x - beliefs.x, y - beliefs.y, beliefs.half_x, beliefs.half_y)
+    return distance - scenario.collision_distance
+
+
+def fail_variants(agent, monkeypatch, failing: tuple[str, ...]) -> list[str]:
+    """Make every solver call of the ``failing`` variants fail; returns the variants called."""
+    calls: list[str] = []
+    original = agent._call
+
+    def call(pr, args, rung=0):
+        calls.append(pr.variant)
+        if pr.variant in failing:
+            return {}, "forced failure", False, 0, {}
+        return original(pr, args, rung)
+
+    monkeypatch.setattr(agent, "_call", call)
+    return calls
+
+
+def inside_the_box(scenario: Scenario) -> np.ndarray:
     obs = start_observation(scenario).copy()
     obs[ob.EGO_POSE] = (5.0, -3.5, np.pi / 2)  # on top of the object, moving with it
     obs[ob.EGO_INPUT] = (2.0, 0.1)
+    return obs
+
+
+@pytest.mark.parametrize(
+    ("make", "epsilon"),
+    [
+        (lambda sc: RMPC(sc, max_solve_time=UNCAPPED), 0.0),
+        (lambda sc: SMPC(sc, max_solve_time=UNCAPPED), 0.0),
+        (lambda sc: SMPC(sc, max_solve_time=UNCAPPED), 1000.0),
+    ],
+    ids=["rmpc", "smpc-exact-0", "smpc-exact-1000"],
+)
+def test_soft_problem_is_an_exact_penalty_where_the_hard_one_is_feasible(make, epsilon) -> None:
+    """Along a closed loop, the soft problem solved from the same point as the hard one returns
+    the hard plan with zero slacks: rho exceeds the risk rows' multipliers."""
+    from agents.ocp import soft_variant
+    from agents.step import Step
+
+    env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=epsilon, max_steps=14)
+    agent = make(env.unwrapped.scenario)
+    obs, _ = env.reset(seed=0)
+    agent.reset()
+    binding = 0
+    for _ in range(14):
+        action, _ = agent.predict(obs)
+        report = agent.last_solve
+        assert report.fallback is None and agent.failures == 0
+        if report.variant != "free":
+            # the soft problem, started at the hard plan (slack costs 0), stays there
+            step = Step(agent, 1, obs, Budget(math.inf))
+            hard, soft = agent._problem(step.variant), agent._problem(soft_variant(step.variant))
+            plan = np.column_stack([report.inputs, report.path_speed])
+            w0 = guesses.pack(soft, guesses.rollout(soft, step.x0, plan), plan)
+            w0[soft.slack_index] = 1e-6
+            out, _ = step.solve(soft, [(w0, None, None)], reserve=0.0)
+            assert out is not None
+            slacks = out["x"][soft.slack_index]
+            assert np.all(np.abs(slacks) <= 1e-6), slacks
+            # to the solver's tolerance (tol = 1e-4, scaled by the multipliers rho_n of the slacks'
+            # bounds), on a problem flat in some inputs
+            np.testing.assert_allclose(out["x"][soft.u_index][0, :2], report.inputs[0], atol=1e-2)
+            cost = float(out["f"][0]) - float(soft.slack_costs @ slacks)
+            assert cost == pytest.approx(report.cost, rel=1e-3)
+            # ... because rho exceeds the hard rows' multipliers
+            hard_out = agent._memory[0]
+            multipliers = (
+                np.abs(hard_out["lam_g"][hard.risk_rows]) if hard_out["variant"] == hard.variant else 0.0
+            )
+            binding += bool(np.any(multipliers > 1e-3))
+            assert np.all(multipliers < soft.slack_costs)
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    assert binding >= 3  # the check saw active risk rows
+
+
+def test_a_feasible_hard_problem_whose_calls_fail_is_solved_through_its_exact_penalty(monkeypatch) -> None:
+    """The hard problem is feasible but its calls fail: the soft plan has zero slacks, so it is the
+    hard problem's solution (the penalty is exact): level (a), never "soft"."""
+    scenario = Scenario.preset("medium", risk_tolerance=0.0)
+    agent = SMPC(scenario)
+    obs = start_observation(scenario)
+    reference = SMPC(scenario)
+    reference.predict(obs)
+    calls = fail_variants(agent, monkeypatch, ("zero",))
+    agent.predict(obs)
+    report = agent.last_solve
+    assert "zero_soft" in calls and report.fallback is None and agent.failures == 0
+    assert report.retried and report.variant == "zero_soft" and report.violation == 0.0
+    assert report.failed_calls == calls.count("zero") == 3
+    # a plan of the hard problem (from another start than the reference's: maybe another optimum)
+    assert np.all(report.risk == 0.0) and report.cost == pytest.approx(reference.last_solve.cost, rel=0.05)
+    assert np.all(box_clearance(scenario, obs, report.ego_trajectory) >= -1e-6)
+
+
+def test_soft_plan_inside_the_box_reports_its_violation_and_escapes() -> None:
+    scenario = Scenario.preset("low")
+    agent = RMPC(scenario)
+    obs = inside_the_box(scenario)
     for count in (1, 2):
         action, _ = agent.predict(obs)
         report = agent.last_solve
-        assert not report.success and report.fallback == "brake"
-        assert agent.failures == count
+        assert report.fallback == "soft" and report.success and report.variant == "general_soft"
+        assert report.violation > 0.1 and agent.failures == count
         check_action(scenario, action, obs[ob.EGO_INPUT])
-        assert action[0] == pytest.approx(2.0 - scenario.ego.accel_max * scenario.dt, abs=1e-5)
-        assert action[1] == pytest.approx(0.0, abs=1e-6)
         assert np.all(np.isfinite(report.ego_trajectory)) and np.all(np.isfinite(report.risk))
+    # the soft plan leaves the boxes faster than braking does
+    clearance = box_clearance(scenario, obs, report.ego_trajectory)
+    x0 = np.array([5.0, -3.5, np.pi / 2, 0.0, 2.0, 0.1])
+    base = agent._problem("free")
+    braking = guesses.rollout(base, x0, fallback.manoeuvres(scenario, x0)["brake"])
+    assert clearance.sum() > box_clearance(scenario, obs, braking).sum()
     agent.reset()
     assert agent.failures == 0 and agent.last_solve is None
 
 
-def test_fallback_with_too_few_iterations() -> None:
+def test_safest_manoeuvre_when_every_solve_fails(monkeypatch) -> None:
+    """Every call fails: the agent applies the manoeuvre that keeps the worst-case clearance
+    largest, within the rate limits, and never brakes into the object's path."""
+    scenario = Scenario.preset("medium")
+    agent = RMPC(scenario)
+    fail_variants(agent, monkeypatch, ("free", "general", "general_soft"))
+    obs = start_observation(scenario).copy()
+    obs[ob.EGO_POSE] = (0.0, -2.0, 0.0)  # heading across the object's path, 5 m to its left
+    obs[ob.EGO_INPUT] = (4.0, 0.0)
+    action, _ = agent.predict(obs)
+    report = agent.last_solve
+    assert report.fallback == "manoeuvre" and not report.success and report.manoeuvre in fallback.MANOEUVRES
+    assert report.status.startswith("manoeuvre") and report.failed_calls >= 2
+    check_action(scenario, action, obs[ob.EGO_INPUT])
+    x0 = np.array([0.0, -2.0, 0.0, 0.0, 4.0, 0.0])
+    base = agent._problem("free")
+    family = fallback.manoeuvres(scenario, x0)
+    clear = {n: box_clearance(scenario, obs, guesses.rollout(base, x0, u)) for n, u in family.items()}
+    first = {n: int(np.argmax(c < 0)) if np.any(c < 0) else len(c) for n, c in clear.items()}
+    chosen = box_clearance(scenario, obs, report.ego_trajectory)
+    assert report.manoeuvre != "brake" and first[report.manoeuvre] == max(first.values())
+    assert first[report.manoeuvre] > first["brake"] or chosen.min() > clear["brake"].min()
+
+
+def test_safest_ranks_time_to_violation_then_clearance() -> None:
+    risk = np.array([[0.0, 5.0, 5.0], [0.0, 0.0, 5.0], [0.0, 0.0, 9.0], [5.0, 0.0, 0.0]])
+    clearance = np.array([[9.0, 9.0, 9.0], [-1.0, -2.0, -3.0], [1.0, 0.5, -1.0], [9.0, 9.0, 9.0]])
+    assert fallback.safest(risk, clearance, epsilon=1.0) == 2  # violates last, and by less
+    assert fallback.safest(risk[[0, 3]], clearance[[0, 3]], epsilon=1.0) == 0
+    # all violate at n = 1: the least violation there wins, however the later steps look
+    assert fallback.safest(np.ones((2, 3)), np.array([[-0.5, -9.0, -9.0], [-1.0, 5.0, 5.0]]), 0.0) == 0
+    # none violates: the largest smallest clearance
+    assert fallback.safest(np.zeros((2, 3)), clearance[[1, 2]], epsilon=0.0) == 1
+    with pytest.raises(ValueError, match="risk and clearance"):
+        fallback.safest(np.zeros((2, 3)), np.zeros((3, 3)), epsilon=0.0)
+
+
+def test_manoeuvres_keep_the_rate_limits() -> None:
+    scenario = Scenario.preset("low")
+    x0 = np.array([0.0, 0.0, 0.0, -70.0, 2.0, -0.3])
+    family = fallback.manoeuvres(scenario, x0)
+    assert tuple(family) == fallback.MANOEUVRES and len(family) == 12
+    ego, dt = scenario.ego, scenario.dt
+    for inputs in family.values():
+        v = np.concatenate([[x0[4]], inputs[:, 0]])
+        w = np.concatenate([[x0[5]], inputs[:, 1]])
+        assert np.all(np.abs(np.diff(v)) <= ego.accel_max * dt + 1e-12)
+        assert np.all(np.abs(np.diff(w)) <= ego.omega_rate_max * dt + 1e-12)
+        assert np.all((v >= ego.v_min) & (v <= ego.v_max)) and np.all(np.abs(w) <= ego.omega_max)
+    assert family["accelerate_left"][-1, 0] == ego.v_max and family["accelerate_left"][-1, 1] == ego.omega_max
+    assert family["reverse"][-1, 0] == ego.v_min and family["hold"][0, 0] == x0[4]
+
+
+def test_too_few_iterations_end_in_a_manoeuvre() -> None:
     scenario = Scenario.preset("medium", risk_tolerance=500.0)
     agent = SMPC(scenario, max_iter=1)
     action, _ = agent.predict(start_observation(scenario))
-    assert agent.last_solve.fallback == "brake" and agent.failures == 1
+    assert agent.last_solve.fallback == "manoeuvre" and agent.failures == 1
     check_action(scenario, action, np.zeros(2))
 
 
-def test_fallback_follows_the_shifted_previous_plan(monkeypatch) -> None:
-    env = gym.make("RiskCrossing-v0", uncertainty="low")
-    agent = RMPC.from_env(env)
-    obs, _ = env.reset(seed=0)
-    action, _ = agent.predict(obs)
-    plan = agent.last_solve.inputs.copy()
-    obs, *_ = env.step(action)
-    monkeypatch.setattr(agent, "_call", lambda pr, args: ({}, "forced failure", False, 0, {}))
-    for n in (1, 2):
-        action, _ = agent.predict(obs)
-        assert agent.last_solve.fallback == "shifted_plan" and agent.last_solve.status == "forced failure"
-        assert agent.failures == n
-        np.testing.assert_allclose(action, plan[n], atol=1e-5)
-        obs, *_ = env.step(action)
+def test_the_time_cap_holds_and_hands_over_to_the_next_level() -> None:
+    scenario = Scenario.preset("medium", risk_tolerance=1000.0)
+    obs = start_observation(scenario)
+    tiny = SMPC(scenario, max_solve_time=1e-4)  # no solver call fits
+    action, _ = tiny.predict(obs)
+    report = tiny.last_solve
+    assert report.fallback == "manoeuvre" and report.capped and report.iterations == 0
+    check_action(scenario, action, np.zeros(2))
+    env = gym.make("RiskCrossing-v0", scenario=scenario.replace(max_steps=12))
+    agent = SMPC.from_env(env, max_solve_time=0.05)
+    assert agent.max_solve_time == 0.05 and SMPC(scenario).max_solve_time == pytest.approx(0.1)
+    run = closed_loop(agent, env, 12)
+    assert len(run["action"]) >= 6
+    # the cap's own slack: the prediction of a call's time and what follows the last call
+    assert max(r.solve_time for r in agent.last_solves) <= 0.05 + 0.02
+
+
+def test_rungs_hold_the_solvers_own_limits() -> None:
+    fatrop = SolverSettings(max_iter=100, rungs=3, time_limit=0.1)
+    assert fatrop.rung_limits() == ((100, None), (50, None), (25, None))
+    assert fatrop.plugin_options(2)["fatrop"]["max_iter"] == 25
+    ipopt = SolverSettings(solver="ipopt", max_iter=100, rungs=3, time_limit=0.1)
+    assert ipopt.rung_limits() == ((100, 0.1), (100, 0.05), (100, 0.025))
+    assert ipopt.plugin_options(1)["ipopt"]["max_wall_time"] == 0.05
+    times = CallTimes(fatrop.rung_limits(), prior=1e-3, failing=4e-3)
+    # before any call: 1.3 x the priors per iteration, the failing call's for a long one
+    assert times.per_iteration(5) == pytest.approx(1.3e-3) and times.per_iteration(25) == pytest.approx(
+        5.2e-3
+    )
+    assert times.rung(0.6) == 0 and times.rung(0.2) == 2 and times.rung(0.1) is None
+    assert times.per_iteration(5) == pytest.approx(0.8 * 1.3e-3)  # discounted after the skip
+    for _ in range(20):
+        times.record(30, 30 * 1e-3 + 5e-4)  # long calls at 1 ms per iteration
+    assert times.per_iteration(25) == pytest.approx(1.3e-3) and times.rung(0.2) == 0
+    with pytest.raises(ValueError, match="rungs"):
+        SolverSettings(rungs=0)
 
 
 # ----------------------------------------------------------------------------- API
@@ -329,17 +515,19 @@ def test_compiled_solver_writes_nothing_to_the_working_directory(tmp_path, monke
     assert agent.compiled
     assert list(work.iterdir()) == []
     libraries = sorted(p.name for p in cache.iterdir())
-    assert len(libraries) == 2 and all(n.startswith("riskmpc_") and n.endswith(".so") for n in libraries)
+    # free, general and general_soft: every rung of a variant loads its one library
+    assert len(libraries) == 3 and all(n.startswith("riskmpc_") and n.endswith(".so") for n in libraries)
     obs = start_observation(scenario)
     action, _ = agent.predict(obs)
     plain = RMPC(scenario)
     np.testing.assert_allclose(action, plain.predict(obs)[0], atol=1e-6)
     assert agent.last_solve.iterations == plain.last_solve.iterations
     # a new process (here: the in-process solver cache emptied) loads the libraries, compiles nothing
+    from agents import compiled
     from agents import solver as mpc
 
     monkeypatch.setattr(mpc, "_SOLVER_CACHE", type(mpc._SOLVER_CACHE)())
-    monkeypatch.setattr(mpc.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
+    monkeypatch.setattr(compiled.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
     again = RMPC(scenario, jit=True, jit_opt=0, jit_cache=cache)
     assert again.compiled and sorted(p.name for p in cache.iterdir()) == libraries
     np.testing.assert_allclose(again.predict(obs)[0], action, atol=1e-9)
@@ -366,7 +554,7 @@ def test_monte_carlo_cold_start_goes_through_the_pilot():
     agent = SMPC(scenario, risk="monte_carlo", samples=200, pilot_samples=40, seed=3)
     calls = []
     original = agent._call
-    monkeypatch_call = lambda pr, args: calls.append(pr.variant) or original(pr, args)  # noqa: E731
+    monkeypatch_call = lambda pr, args, rung=0: calls.append(pr.variant) or original(pr, args, rung)  # noqa: E731
     agent._call = monkeypatch_call
     agent.predict(obs)
     assert agent.last_solve.success and len(calls) == 1

@@ -1,0 +1,321 @@
+"""The standing reliability benchmark: every MPC agent over a seeded family of random scenes.
+
+    python -m benchmarks.stress                          # 200 scenes x rmpc, smpc0, smpc1000
+    python -m benchmarks.stress --scenes 20 --agents rmpc --out /tmp/stress
+
+The scenes (:mod:`benchmarks.scenes`): starts near the path; objects close by, crossing the path,
+or never crossing it; every uncertainty level of Table I and an enlarged growth; v_ref from 1 to
+8 m/s; the paper's and sampled object motion. Per agent it reports collisions, split into
+avoidable (some rate-limited open-loop manoeuvre from the start would have kept clear of the
+object's true motion for the whole episode) and unavoidable; how often each fallback level of
+the MPC acted (``"soft"``: the risk rows softened; ``"manoeuvre"``: the safest rate-limited
+manoeuvre), as a share of all steps; solver calls that failed; and the step time (the whole
+``predict``) at p50 / p95 / p99 / max.
+
+Writes ``stress.csv`` (one row per agent and scene), ``stress_summary.csv`` and ``stress.md``
+(the command that made them in its header) to ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import shlex
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks import cli
+from benchmarks.scenes import Scene, infeasible_first_step, make_scenes, object_truth, witness_clearance
+from benchmarks.sweep import run_sweep
+
+AGENTS: dict[str, tuple[str, str, float]] = {
+    "rmpc": ("RMPC", "worst_case", 0.0),
+    "smpc0": ("SMPC", "exact", 0.0),
+    "smpc1000": ("SMPC", "exact", 1000.0),
+    "smpc_mc1000": ("SMPC", "monte_carlo", 1000.0),
+}
+"""Agent names -> (method, risk estimator, epsilon [J])."""
+DEFAULT_AGENTS = ("rmpc", "smpc0", "smpc1000")
+EPISODE_COLUMNS = (
+    "agent",
+    "scene",
+    "uncertainty",
+    "kind",
+    "motion",
+    "v_ref",
+    "epsilon",
+    "steps",
+    "collided",
+    "avoidable",
+    "witness_clearance",
+    "d_min",
+    "reached_goal",
+    "fallback_soft",
+    "fallback_manoeuvre",
+    "penalty_steps",
+    "infeasible_steps",
+    "failed_calls",
+    "capped_steps",
+    "solve_ms_p50",
+    "solve_ms_max",
+)
+SUMMARY_COLUMNS = (
+    "agent",
+    "scenes",
+    "steps",
+    "collisions",
+    "avoidable",
+    "unavoidable",
+    "fallback_pct",
+    "soft_pct",
+    "manoeuvre_pct",
+    "penalty_steps",
+    "infeasible_pct",
+    "failed_calls",
+    "capped_steps",
+    "solve_ms_p50",
+    "solve_ms_p95",
+    "solve_ms_p99",
+    "solve_ms_max",
+)
+
+
+@dataclass(frozen=True)
+class Job:
+    """One agent on one scene."""
+
+    agent: str
+    scene: Scene
+    options: tuple[tuple[str, Any], ...] = ()
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """One episode: its CSV row, plus its per-step solve times ``"_times"`` [s]."""
+    import gymnasium as gym
+
+    import risk_env  # noqa: F401  (registers the env)
+    from benchmarks.rollout import build_agent, rollout
+
+    method, risk, epsilon = AGENTS[job.agent]
+    scene = job.scene
+    env = gym.make("RiskCrossing-v0", **scene.env_kwargs(epsilon))
+    agent = build_agent(method, risk, env, seed=scene.index, **dict(job.options))
+    record = rollout(agent, env, seed=scene.seed)
+    env.close()
+    truth = object_truth(scene)
+    steps = record.steps
+    if not np.allclose(record.object[:, :2], truth[: steps + 1], atol=1e-9):  # the replay is the env's
+        raise RuntimeError(f"scene {scene.label}: the replayed object motion differs from the env's")
+    clearance = witness_clearance(scene, truth)
+    reports = [r for r in record.reports if r is not None]
+    ms = 1e3 * record.solve_time
+    return {
+        "agent": job.agent,
+        "scene": scene.index,
+        "uncertainty": scene.uncertainty,
+        "kind": scene.kind,
+        "motion": scene.motion,
+        "v_ref": dict(scene.overrides)["v_ref"],
+        "epsilon": epsilon,
+        "steps": steps,
+        "collided": record.collision,
+        "avoidable": record.collision and clearance > 0.0,
+        "witness_clearance": round(clearance, 3),
+        "d_min": round(record.d_min, 3),
+        "reached_goal": record.success,
+        "fallback_soft": record.fallbacks("soft"),
+        "fallback_manoeuvre": record.fallbacks("manoeuvre"),
+        "penalty_steps": int(sum(r.fallback is None and r.variant.endswith("_soft") for r in reports)),
+        "infeasible_steps": infeasible_steps(scene, record, epsilon, agent) if epsilon == 0.0 else "",
+        "failed_calls": int(sum(getattr(r, "failed_calls", int(r.failed)) for r in reports)),
+        "capped_steps": int(sum(bool(getattr(r, "capped", False)) for r in reports)),
+        "solve_ms_p50": round(float(np.median(ms)), 3),
+        "solve_ms_max": round(float(ms.max()), 3),
+        "_times": record.solve_time,
+    }
+
+
+def infeasible_steps(scene: Scene, record: Any, epsilon: float, agent: Any) -> int:
+    """Fallback steps of the episode certified infeasible at n = 1 (:func:`scenes.infeasible_first_step`,
+    for a risk row that is the box clearance: epsilon = 0)."""
+    sc = scene.scenario(epsilon)
+    count = 0
+    for k in np.flatnonzero(record.fallback):
+        last = np.asarray(sc.ego.initial_input) if k == 0 else record.actions[k - 1]
+        measurement = (*record.object[k], sc.object.turn_rate)
+        count += infeasible_first_step(sc, record.ego[k, :3], last, np.array(measurement), agent.backoff)
+    return count
+
+
+def summarise(agent: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """One agent's line of the summary."""
+    steps = sum(r["steps"] for r in rows)
+    ms = 1e3 * np.concatenate([r["_times"] for r in rows])
+    collisions = sum(r["collided"] for r in rows)
+    avoidable = sum(r["avoidable"] for r in rows)
+    soft = sum(r["fallback_soft"] for r in rows)
+    manoeuvre = sum(r["fallback_manoeuvre"] for r in rows)
+    return {
+        "agent": agent,
+        "scenes": len(rows),
+        "steps": steps,
+        "collisions": collisions,
+        "avoidable": avoidable,
+        "unavoidable": collisions - avoidable,
+        "fallback_pct": round(100.0 * (soft + manoeuvre) / steps, 3),
+        "soft_pct": round(100.0 * soft / steps, 3),
+        "manoeuvre_pct": round(100.0 * manoeuvre / steps, 3),
+        "penalty_steps": sum(r["penalty_steps"] for r in rows),
+        "infeasible_pct": round(100.0 * sum(r["infeasible_steps"] for r in rows) / steps, 3)
+        if all(r["infeasible_steps"] != "" for r in rows)
+        else "",
+        "failed_calls": sum(r["failed_calls"] for r in rows),
+        "capped_steps": sum(r["capped_steps"] for r in rows),
+        "solve_ms_p50": round(float(np.percentile(ms, 50)), 2),
+        "solve_ms_p95": round(float(np.percentile(ms, 95)), 2),
+        "solve_ms_p99": round(float(np.percentile(ms, 99)), 2),
+        "solve_ms_max": round(float(ms.max()), 2),
+    }
+
+
+def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command: str, wall: float) -> str:
+    lines = [
+        "# Stress benchmark: collisions, fallbacks and step times over random scenes",
+        "",
+        f"Command: `{command}`",
+        "",
+        "Collisions: avoidable = some rate-limited open-loop manoeuvre from the start kept clear of the",
+        "object's true motion for the whole episode (see `benchmarks/scenes.py`). Fallback levels as a",
+        "share of all steps: soft = the risk rows softened by L1-penalised slacks, manoeuvre = the",
+        "safest rate-limited manoeuvre. Penalty: steps whose hard calls failed but whose soft plan",
+        "had zero slacks, so it solved the hard problem (the exact penalty; level (a), not a",
+        "fallback). Failed calls: solver calls that did not converge (every attempt of a step).",
+        "Infeasible: fallback steps certified infeasible at n = 1 (no input within the rate limits",
+        "clears the first truncation box; for epsilon = 0, whose row is the box clearance), a share of",
+        "all steps: a fallback must act there. Capped: steps where the time cap cut a call short or left",
+        "no time for one. Step time: the whole `predict` call [ms].",
+        "",
+        "| agent | method | eps [J] | scenes | steps | collisions (avoidable / unavoidable) |"
+        " fallback % (soft / manoeuvre) | infeasible % | penalty | failed calls | capped |"
+        " p50 | p95 | p99 | max [ms] |",
+        "|" + " --- |" * 15,
+    ]
+    for s in summary:
+        method, risk, eps = AGENTS[s["agent"]]
+        lines.append(
+            f"| {s['agent']} | {method} {risk} | {eps:g} | {s['scenes']} | {s['steps']} | "
+            f"{s['collisions']} ({s['avoidable']} / {s['unavoidable']}) | "
+            f"{s['fallback_pct']:.2f} ({s['soft_pct']:.2f} / {s['manoeuvre_pct']:.2f}) | "
+            f"{'-' if s['infeasible_pct'] == '' else format(s['infeasible_pct'], '.2f')} | "
+            f"{s['penalty_steps']} | {s['failed_calls']} | {s['capped_steps']} | {s['solve_ms_p50']:.1f} | "
+            f"{s['solve_ms_p95']:.1f} | {s['solve_ms_p99']:.1f} | {s['solve_ms_max']:.1f} |"
+        )
+    collided = [r for r in rows if r["collided"]]
+    if collided:
+        lines += [
+            "",
+            "## Collisions",
+            "",
+            "| agent | scene | uncertainty | kind | motion | v_ref | steps |"
+            " avoidable | witness clearance [m] | fallback steps (soft / manoeuvre) |",
+            "|" + " --- |" * 10,
+        ]
+        for r in collided:
+            lines.append(
+                f"| {r['agent']} | {r['scene']} | {r['uncertainty']} | {r['kind']} | {r['motion']} | "
+                f"{r['v_ref']:g} | {r['steps']} | {'yes' if r['avoidable'] else 'no'} | "
+                f"{r['witness_clearance']:.2f} | {r['fallback_soft']} / {r['fallback_manoeuvre']} |"
+            )
+    lines += ["", f"Wall time: {wall:.0f} s."]
+    return "\n".join(lines) + "\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.stress`` (defaults shown in ``--help``)."""
+    p = cli.parser("stress", __doc__)
+    p.add_argument("--scenes", type=int, default=200, help="number of random scenes per agent")
+    p.add_argument("--seed", type=int, default=0, help="seed of the scene family")
+    p.add_argument(
+        "--agents",
+        default=",".join(DEFAULT_AGENTS),
+        help=f"comma list from {', '.join(AGENTS)} (smpc_mc1000: Monte Carlo, slow)",
+    )
+    p.add_argument(
+        "--max-solve-time",
+        type=float,
+        default=None,
+        help="wall-time cap of one MPC step [s] (default: the agents' own, 20%% of the sample time)",
+    )
+    p.add_argument("--solver", default=None, choices=("fatrop", "ipopt"), help="NLP solver (default: fatrop)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("results"),
+        help="output folder (the committed run is in docs/results/stress/)",
+    )
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=False,
+        metavar="ADDRESS",
+        help="run on Ray (an address, or local)",
+    )
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
+    args = p.parse_args(argv)
+    args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
+    if bad := [a for a in args.agents if a not in AGENTS]:
+        p.error(f"unknown agent(s) {bad}; expected from {list(AGENTS)}")
+    if args.scenes < 1:
+        p.error(f"--scenes must be >= 1, got {args.scenes}")
+    if args.max_solve_time is not None and not args.max_solve_time > 0:
+        p.error(f"--max-solve-time must be > 0, got {args.max_solve_time}")
+    return args
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    args = parse_args(argv)
+    command = "python -m benchmarks.stress " + " ".join(
+        shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)
+    )
+    options: dict[str, Any] = {}
+    if args.max_solve_time is not None:
+        options["max_solve_time"] = args.max_solve_time
+    if args.solver is not None:
+        options["solver"] = args.solver
+    scenes = make_scenes(args.scenes, args.seed)
+    jobs = [Job(a, s, tuple(sorted(options.items()))) for a in args.agents for s in scenes]
+    t0 = time.perf_counter()
+    rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="stress episodes")
+    wall = time.perf_counter() - t0
+    summary = [summarise(a, [r for r in rows if r["agent"] == a]) for a in args.agents]
+    args.out.mkdir(parents=True, exist_ok=True)
+    for name, columns, table in (
+        ("stress.csv", EPISODE_COLUMNS, rows),
+        ("stress_summary.csv", SUMMARY_COLUMNS, summary),
+    ):
+        with (args.out / name).open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+            writer.writeheader()
+            writer.writerows(table)
+    text = markdown(summary, rows, command.strip(), wall)
+    (args.out / "stress.md").write_text(text)
+    print(text)
+    print(
+        "Wrote:\n" + "\n".join(f"  {args.out / n}" for n in ("stress.csv", "stress_summary.csv", "stress.md"))
+    )
+    return summary
+
+
+if __name__ == "__main__":
+    main()
