@@ -266,9 +266,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--max-solve-time",
         type=float,
-        default=None,
-        help="the MPC agents' wall-time cap per step [s] (default: 20%% of T; inf: none, so that"
-        " results do not depend on the machine's load)",
+        default=math.inf,
+        help="the MPC agents' wall-time cap per step [s]; inf: none, so that results do not depend on"
+        " the machine's load; 0.1: the agents' own default, 20%% of T",
     )
     p.add_argument("--episodes", type=int, default=200, help="seeded episodes per configuration")
     p.add_argument("--chunk", type=int, default=25, help="episodes per job (one agent build per job)")
