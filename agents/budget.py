@@ -45,6 +45,8 @@ class Budget:
 
     def __init__(self, cap: float, start: float | None = None) -> None:
         self.start = time.perf_counter() if start is None else start
+        self.cpu_start = time.process_time()
+        """The process's CPU time at the start [s, ``time.process_time``]."""
         self.deadline = self.start + (1.0 - END_SHARE) * cap
         """When the step's last solver call must end [s, ``time.perf_counter``]."""
         self.capped = False

@@ -98,11 +98,11 @@ def initial_point(
     w = fill_accumulators(problem, pack(problem, rollout(problem, x0, inputs), inputs), p)
     cost, g = problem.evaluate(w, p)
     cost, g = float(cost), np.asarray(g).ravel()
-    if problem.slack_index.size:  # the objective is linear in the slacks: sum_n rho_n s_n
+    if problem.slack_index.size:  # the slacks where the rows fall short
         shortfall = np.maximum(lbg[problem.risk_rows] - g[problem.risk_rows], 0.0)
         w[problem.slack_index] = shortfall + SLACK_PUSH
         g[problem.risk_rows] += shortfall + SLACK_PUSH
-        cost += float(problem.slack_costs @ w[problem.slack_index])
+        cost = float(problem.evaluate(w, p)[0])
     violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
     return w, violation, cost
 
@@ -114,11 +114,12 @@ def cold_guesses(
     p: np.ndarray,
     lbg: np.ndarray,
     extra: dict[str, np.ndarray] | None = None,
-) -> list[np.ndarray]:
+) -> list[tuple[np.ndarray, float]]:
     """The :func:`candidates` (and the ``extra`` input sequences ``(N, NU)``) as initial points w
-    (:func:`initial_point`), best first: smallest constraint violation, then cost."""
+    (:func:`initial_point`) with their constraint violations, best first: smallest violation, then
+    cost."""
     scored = []
     for inputs in [*candidates(scenario, x0).values(), *(extra or {}).values()]:
         w0, violation, cost = initial_point(problem, x0, inputs, p, lbg)
         scored.append((violation, cost, len(scored), w0))
-    return [w0 for *_, w0 in sorted(scored, key=lambda s: s[:3])]
+    return [(w0, violation) for violation, _, _, w0 in sorted(scored, key=lambda s: s[:3])]

@@ -20,6 +20,7 @@ The optimal control problem is in :mod:`agents.ocp`, its solver (options, compil
 from __future__ import annotations
 
 import functools
+import gc
 import math
 import os
 import warnings
@@ -88,8 +89,9 @@ class PathFollowingMPC:
         least violation of the risk bound the solver found (so the most clearance it could keep),
         is applied: ``fallback="soft"`` with the ``violation``.
         After a step that missed the risk bound (``"soft"`` or ``"manoeuvre"``) the next step
-        goes to the soft problem directly ("elastic mode", as in SNOPT): the hard problem is most
-        likely infeasible still, and where it is not, its exact penalty returns its solution.
+        goes to the soft problem directly, from the shifted plan only ("elastic mode", as in
+        SNOPT): the hard problem is most likely infeasible still, and where it is not, its exact
+        penalty returns its solution.
     (c) if that fails too: the safest of a family of rate-limited manoeuvres (brake, hold,
         accelerate, reverse, each straight or turning fully left or right; :mod:`agents.fallback`),
         judged by the agent's own risk and the worst-case clearance over the horizon:
@@ -344,7 +346,7 @@ class PathFollowingMPC:
             key = (
                 type(self).__name__,
                 variant,
-                problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
+                problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
                 self._risk_terms(),
@@ -390,8 +392,14 @@ class PathFollowingMPC:
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
         """One step for the observation ``obs_vec`` (15,) of batch entry ``index``
         (:class:`agents.step.Step`), within the wall-time cap."""
-        with Budget.open(self.max_solve_time) as budget:
-            return Step(self, index, obs_vec, budget).run()
+        collecting = gc.isenabled()
+        gc.disable()  # no garbage-collection pause inside the step: it runs between steps
+        try:
+            with Budget.open(self.max_solve_time) as budget:
+                return Step(self, index, obs_vec, budget).run()
+        finally:
+            if collecting:
+                gc.enable()
 
     def _new_episode(self, mem: dict[str, Any], o: ob.Observation) -> bool:
         """The observation does not continue the episode this memory belongs to."""

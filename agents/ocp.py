@@ -25,10 +25,11 @@ The sections of :func:`assemble`, in order:
   the agent's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, the
-  numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box, speed
-  bounds) and the agent's risk data (Monte Carlo draws). Agents that differ only in their
-  tolerance or uncertainty level share one built (or compiled) solver.
+- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, v_ref,
+  the numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box,
+  speed bounds) and the agent's risk data (Monte Carlo draws). Agents that differ only in their
+  tolerance, reference speed, uncertainty level or start share one built (or compiled) solver
+  (:func:`problem_key`).
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
@@ -37,7 +38,9 @@ The sections of :func:`assemble`, in order:
   [margin units] and ``sum_n rho_n s_n`` added to the objective, ``rho_n = rho *``
   :data:`EARLY_WEIGHT` ``**(N - n)`` (an exact L1 penalty: whenever every rho_n exceeds its risk
   row's multiplier, every solution of the hard problem solves the soft one with s = 0, and a soft
-  solution with s = 0 solves the hard problem). The slack of row n is a
+  solution with s = 0 solves the hard problem). A slack costs up to twice as much near the
+  object's predicted mean (:data:`NEAR_WEIGHT`): where the boxes cannot be kept off, the plan
+  misses them where the object is least likely. The slack of row n is a
   control of stage n (the last stage's after x_N), so the problem stays stage-wise for fatrop.
 
 The solver built on this NLP lives in :mod:`agents.solver`; the controller that calls it in
@@ -59,7 +62,7 @@ from risk_env.dynamics import casadi_step
 from risk_env.ops import CASADI
 from risk_env.path import path_error, timing_law
 from risk_env.prediction import Belief, predict
-from risk_env.scenario import Scenario
+from risk_env.scenario import Pose, Scenario
 
 STAGE_COSTS: tuple[str, ...] = ("reached", "paper")
 SOFT = "_soft"
@@ -69,6 +72,11 @@ EARLY_WEIGHT = 4.0
 """A soft variant's slack of row n costs ``rho * EARLY_WEIGHT**(N - n)``: the earlier a violation,
 the dearer (near lexicographic: the plan keeps clear first at n = 1, then at n = 2, ...), since
 the object's early positions are the likely ones and the later boxes only grow."""
+NEAR_WEIGHT = 1.0
+"""A soft variant's slack of row n costs up to ``1 + NEAR_WEIGHT`` times rho_n where the ego is at
+the object's predicted mean (a Gaussian bump of the belief's spread widened by r_e + r_o)."""
+PARKED = Pose(0.0, 0.0, 0.0)
+"""The pose :func:`problem_key` puts in place of the starts, which the NLP does not see."""
 NX = 6
 """Stage state: c1 [m], c2 [m], theta [rad], lambda [m], previous v [m/s], previous omega [rad/s]."""
 NU = 3
@@ -164,11 +172,13 @@ def assemble(
     # share one solver), per-step risk data; the object's beliefs
     p_obj = sym.sym("object", 5)
     p_eps = sym.sym("epsilon")
+    p_vref = sym.sym("v_ref")
     p_unc = sym.sym("uncertainty", len(uncertainty_vector(sc)))
     p_data = [sym.sym(f"risk_data_{n}", *risk_shape) for n in range(1, N + 1)]
     with_terms = any(terms)
     p_terms = sym.sym("risk_terms", TERMS) if with_terms else None
-    p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data), *([p_terms] if with_terms else []))
+    extra = [p_terms] if with_terms else []
+    p = ca.vertcat(p_obj, p_eps, p_vref, p_unc, *(ca.vec(d) for d in p_data), *extra)
     beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(p_unc))
     fields = [f.name for f in dataclasses.fields(Belief)]
     stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
@@ -214,7 +224,14 @@ def assemble(
         cost = 0.0 if weight is None else weight * values[n]
         if soft:
             row = row + S[n]
-            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * S[n]
+            # a violation costs more where the object is likelier (near its predicted mean, at the
+            # belief's spread widened by r_e + r_o): where the boxes cannot be kept off, the plan
+            # misses them where the object is least expected; the weight stays >= rho_n (exact)
+            b = stacked[n]
+            r2 = sc.collision_distance**2
+            z2 = (X[n][0] - b[0]) ** 2 / (b[4] ** 2 + r2) + (X[n][1] - b[1]) ** 2 / (b[5] ** 2 + r2)
+            near = 1.0 + NEAR_WEIGHT * ca.exp(-0.5 * z2)
+            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near * S[n]
         add_g(row, 0.0, math.inf, n, "risk")
         if C and n == N:  # (B - spent - sum_n R_n) * normaliser + switch-off >= backoff
             left = (p_terms[0] - p_terms[1] - C[N] - values[N]) * p_terms[2] + p_terms[3]
@@ -250,7 +267,7 @@ def assemble(
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
             cost += add_risk(n)
-        cost += w_v * (U[n][2] - ego.v_ref) ** 2
+        cost += w_v * (U[n][2] - p_vref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
     w += [X[N], *([C[N]] if C else [])]
     w_tags += [(N, "x", i) for i in range(NX)] + ([(N, "c", 0)] if C else [])
@@ -307,8 +324,13 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
 
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
-    """What of the scenario is built into a solver: all but epsilon and the uncertainty."""
-    skip = ("risk_tolerance", "uncertainty")
-    return tuple(
+    """What of the scenario is built into a solver: all but the parameters (epsilon, v_ref, the
+    uncertainty) and what the NLP never sees (the starts and the object's inputs, measured at each
+    step; the episode's step limit)."""
+    ego = dataclasses.replace(scenario.ego, start=PARKED, v_ref=0.0, initial_input=(0.0, 0.0))
+    obj = dataclasses.replace(scenario.object, start=PARKED, speed=0.0, turn_rate=0.0)
+    skip = ("risk_tolerance", "uncertainty", "max_steps", "ego", "object")
+    kept = tuple(
         (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
     )
+    return (("ego", ego), ("object", obj), *kept)

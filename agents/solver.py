@@ -359,7 +359,7 @@ def iteration_time(
     obj = scenario.object
     p = np.concatenate(
         [
-            [*obj.start.as_tuple(), obj.speed, obj.turn_rate, scenario.risk_tolerance],
+            [*obj.start.as_tuple(), obj.speed, obj.turn_rate, scenario.risk_tolerance, scenario.ego.v_ref],
             uncertainty_vector(scenario),
             np.zeros(N * risk_shape[0] * risk_shape[1]),
         ]

@@ -54,7 +54,7 @@ class Step:
         self.p = np.concatenate(
             [
                 o.object_measurement,
-                [agent._epsilon],
+                [agent._epsilon, sc.ego.v_ref],
                 uncertainty,
                 *(d.ravel(order="F") for d in self.data),
                 agent._terms_parameters(index, self.memory is None),
@@ -79,7 +79,7 @@ class Step:
         if out is None and self.variant != "free":
             budget.reserve = agent._manoeuvre_time
             soft = agent._problem(soft_variant(self.variant))
-            out, violation = self.soft(soft)
+            out, violation = self.soft(soft, elastic)
             if out is not None:
                 pr = soft
                 if violation <= FEASIBLE_SLACK:  # the exact penalty's solution: the hard problem's
@@ -125,12 +125,22 @@ class Step:
         out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=agent._manoeuvre_time)
         return out, out is not None and self.tally.failed_calls > 0
 
-    def soft(self, soft: Problem) -> tuple[Outputs | None, float]:
-        """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``."""
-        out, _ = self.solve(soft, self.guesses(soft, extra=True), self.agent._manoeuvre_time)
-        if out is None:
-            return None, 0.0
-        return out, max(float(np.max(out["x"][soft.slack_index])), 0.0)
+    def soft(self, soft: Problem, elastic: bool) -> tuple[Outputs | None, float]:
+        """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``: from the
+        shifted plan, then (unless ``elastic``: the last step missed the bound too, and its
+        plan is the best start) the best rollouts and manoeuvres while the time lasts, until a
+        plan without violation (the hard problem's solution); else the plan of least objective,
+        so of least (early-weighted) violation."""
+
+        def violation(out: Outputs) -> float:
+            return max(float(np.max(out["x"][soft.slack_index])), 0.0)
+
+        def feasible(out: Outputs) -> bool:
+            return violation(out) <= FEASIBLE_SLACK
+
+        points = self.guesses(soft, extra=True, cold=not elastic)
+        out, _ = self.solve(soft, points, self.agent._manoeuvre_time, keep_best=True, enough=feasible)
+        return (None, 0.0) if out is None else (out, violation(out))
 
     def manoeuvre(self) -> tuple[str, np.ndarray]:
         """Level (c): ``(name, inputs (N, NU))`` of the safest manoeuvre (:mod:`agents.fallback`),
@@ -155,18 +165,12 @@ class Step:
         reserve: float,
         keep_best: bool = False,
         reserve_after: float | None = None,
+        enough: Any = None,
     ) -> tuple[Outputs | None, int]:
         """:func:`agents.attempts.solve` of ``pr`` from ``points`` within the step's budget."""
+        args, call, tally = self.args(pr), self.agent._call, self.tally
         return attempts.solve(
-            self.agent._call,
-            pr,
-            points,
-            self.args(pr),
-            self.budget,
-            reserve,
-            self.tally,
-            keep_best,
-            reserve_after,
+            call, pr, points, args, self.budget, reserve, tally, keep_best, reserve_after, enough
         )
 
     def args(self, pr: Problem) -> dict[str, Any]:
@@ -184,7 +188,9 @@ class Step:
 
     def guesses(self, pr: Problem, extra: bool, cold: bool = True) -> Iterator[Guess]:
         """Initial points, lazily: the shifted previous plan (if any), then (``cold``) the cold
-        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them)."""
+        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them); for
+        the hard problem only the best when even that one misses its rows (then the hard problem
+        is likely infeasible, and the soft one takes the other starts)."""
         agent, mem, lbg = self.agent, self.memory, self.lbg(pr)
         if mem is not None and mem.get("plan") is not None:
             ipopt = agent.settings.warm_start and agent.settings.solver == "ipopt"
@@ -193,7 +199,9 @@ class Step:
         if not cold:
             return
         more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
-        for w0 in guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)[: agent.cold_starts]:
+        cold_points = guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)
+        likely_infeasible = not pr.soft and cold_points[0][1] > 0.0  # even the best misses its rows
+        for w0, _ in cold_points[: 1 if likely_infeasible else agent.cold_starts]:
             yield w0, None, None
 
     def report(
@@ -225,6 +233,7 @@ class Step:
         tally = self.tally
         return SolveReport(
             solve_time=time.perf_counter() - self.budget.start,
+            cpu_time=time.process_time() - self.budget.cpu_start,
             success=kind != "manoeuvre",
             status=tally.status if kind != "manoeuvre" else f"manoeuvre {name} ({tally.status})",
             iterations=tally.iterations,

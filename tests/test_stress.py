@@ -68,6 +68,18 @@ def test_witness_tells_avoidable_from_unavoidable():
     assert family.shape == (13 * len(scenes.TURN_FRACTIONS), 10, 2)
 
 
+def test_infeasible_step_certifies_only_what_no_input_can_clear():
+    sc = scenes.Scene(0, "enlarged", "close", "paper", _scene((-9.0, 10.0, 0.0)).overrides, 0).scenario()
+    ego = np.array([-10.0, 10.0, 0.0])
+    near = np.array([-9.0, 10.0, 0.0, 0.0, 0.0])  # 1 m ahead: inside every box
+    assert scenes.infeasible_step(sc, ego, np.zeros(2), near, backoff=1e-3)
+    far = np.array([40.0, -40.0, 0.0, 0.0, 0.0])
+    assert not scenes.infeasible_step(sc, ego, np.zeros(2), far, backoff=1e-3)
+    # 6.5 m ahead at low uncertainty: braking keeps 3 m off the 1 m box at n = 1, reversing after
+    low = _scene((-3.5, 10.0, 0.0)).scenario()
+    assert not scenes.infeasible_step(low, ego, np.zeros(2), np.array([-3.5, 10.0, 0.0, 0.0, 0.0]), 1e-3)
+
+
 def test_stress_benchmark_on_a_few_scenes(tmp_path, capsys):
     summary = stress.main(
         ["--scenes", "3", "--agents", "rmpc,smpc0", "--workers", "1", "--out", str(tmp_path), "--seed", "5"]
