@@ -278,16 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=Path("results"),
         help="output folder for sampled.csv and sampled.md; the committed ones are in docs/results",
     )
-    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="",
-        default=False,
-        metavar="ADDRESS",
-        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
-        " (default: a process pool)",
-    )
+    cli.add_sweep_options(p)
     return p
 
 

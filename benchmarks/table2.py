@@ -354,16 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=SCENE_NAMES,
         help="which road users cross (risk_env.scenes; default: the paper's one object)",
     )
-    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="",
-        default=False,
-        metavar="ADDRESS",
-        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
-        " (default: a process pool)",
-    )
+    cli.add_sweep_options(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     return p
 
