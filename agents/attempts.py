@@ -131,6 +131,7 @@ def warm_guess(
         w0 = guesses.initial_point(problem, x0, shifted, p, lbg)[0]
     else:
         w0 = guesses.pack(problem, guesses.rollout(problem, x0, shifted), shifted)
+        w0 = guesses.fill_accumulators(problem, w0, p)
     if old is None or memory.get("lam_x") is None:
         return w0, None, None
     lam = []

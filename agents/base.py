@@ -14,6 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from risk_env import checks
+from risk_env import observation as ob
 
 FALLBACK_KINDS: tuple[str, ...] = ("soft", "manoeuvre")
 """The MPC's fallback levels, in order, when the hard problem gives no plan: ``"soft"`` (the plan of
@@ -23,8 +24,9 @@ of a family of rate-limited manoeuvres, judged by the agent's own risk and worst
 
 @runtime_checkable
 class Policy(Protocol):
-    """Anything with SB3's ``predict``: one observation ``(15,)`` -> action ``(2,)``, or a batch
-    ``(B, 15)`` -> ``(B, 2)``; ``state`` is the recurrent state (``None`` for MPC agents)."""
+    """Anything with SB3's ``predict``: one observation ``(10 + 6 K,)`` -> action ``(2,)``, or a
+    batch ``(B, 10 + 6 K)`` -> ``(B, 2)`` (:mod:`risk_env.observation`); ``state`` is the recurrent
+    state (``None`` for MPC agents)."""
 
     def predict(
         self,
@@ -116,14 +118,23 @@ def as_batch(observation: Any, size: int) -> tuple[np.ndarray, bool]:
     strings, complex numbers, a wrong shape)."""
     expected = f"an observation ({size},) or a batch (B, {size}) of real numbers"
     obs = checks.real_array(observation, "observation", expected)
+    if obs.ndim not in (1, 2) or obs.shape[-1] != size:
+        raise ValueError(
+            f"observation must have shape ({size},) or (B, {size}), got {obs.shape}{_slots_hint(obs, size)}"
+        )
     if obs.ndim == 1:
-        if obs.shape != (size,):
-            raise ValueError(f"observation must have shape ({size},) or (B, {size}), got {obs.shape}")
         return obs[None, :], True
-    if obs.ndim != 2 or obs.shape[1] != size:
-        raise ValueError(f"observation must have shape ({size},) or (B, {size}), got {obs.shape}")
     if obs.shape[0] == 0:
         raise ValueError(
             f"observation is an empty batch, shape {obs.shape}; pass at least one observation ({size},)"
         )
     return obs, False
+
+
+def _slots_hint(obs: np.ndarray, size: int) -> str:
+    """Why a RiskCrossing-v0 observation has the wrong length: its object slots differ."""
+    try:
+        found, wanted = ob.slot_count(obs.shape[-1]), ob.slot_count(size)
+    except (ValueError, IndexError):
+        return ""
+    return f" (an observation with {found} object slot(s); this agent reads {wanted})"

@@ -27,6 +27,18 @@ def pack(problem: Problem, states: np.ndarray, inputs: np.ndarray) -> np.ndarray
     return w
 
 
+def fill_accumulators(problem: Problem, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``w`` with the budget's accumulators c_n = R_1 + ... + R_{n-1} of its plan at parameters ``p``
+    (a no-op without a budget): with c = 0 the accumulator rows are -R_n."""
+    if not problem.acc_index.size:
+        return w
+    w = w.copy()
+    w[problem.acc_index] = 0.0
+    g = np.asarray(problem.evaluate(w, p)[1]).ravel()
+    w[problem.acc_index] = np.cumsum(-g[problem.acc_rows])
+    return w
+
+
 def ramp(start: float, target: float, rate: float, limit: tuple[float, float], steps: int) -> np.ndarray:
     """``steps`` values moving from ``start`` toward ``target`` by at most ``rate`` per step, within
     ``limit``."""
@@ -83,7 +95,7 @@ def initial_point(
     violation of w against ``lbg`` and the problem's ubg at parameters ``p``, and the objective (a
     soft variant: with the slacks' cost, so that guesses rank as the soft problem does, early
     violations first)."""
-    w = pack(problem, rollout(problem, x0, inputs), inputs)
+    w = fill_accumulators(problem, pack(problem, rollout(problem, x0, inputs), inputs), p)
     cost, g = problem.evaluate(w, p)
     cost, g = float(cost), np.asarray(g).ravel()
     if problem.slack_index.size:  # the slacks where the rows fall short

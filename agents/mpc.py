@@ -23,6 +23,7 @@ import functools
 import gc
 import math
 import os
+import warnings
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -59,6 +60,10 @@ RUNGS = 6
 to 4 by default) or time (IPOPT) limit."""
 SOFT_PENALTY = 1e4
 """Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
+PLANS_AGAINST_ONE = (
+    "this MPC plans against the first present object of its observation only; the scenario's other"
+    " objects carry no risk constraint (issue 10, items 4-5)"
+)
 
 
 class PathFollowingMPC:
@@ -173,6 +178,8 @@ class PathFollowingMPC:
         self.max_solve_time = float(cap)
         """The wall-time cap of one step [s]."""
         self.scenario = scenario
+        if len(scenario.objects) > 1:
+            warnings.warn(PLANS_AGAINST_ONE, stacklevel=2)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
         self.settings = SolverSettings(
             solver=solver,
@@ -261,12 +268,13 @@ class PathFollowingMPC:
     ) -> tuple[np.ndarray, None]:
         """SB3's predictor protocol: float32 action(s) (v [m/s], omega [rad/s]) and no state.
 
-        ``observation``: one ``(15,)`` or a batch ``(B, 15)``, each solved in turn with its own
-        warm start (by batch index). ``episode_start`` (bool or ``(B,)``) drops the warm start;
+        ``observation``: one ``(10 + 6 K,)`` (K slots: the scenario's objects) or a batch ``(B, 10 + 6 K)``,
+        each solved in turn with its own warm start (by batch index); the plan respects the first
+        present object's risk bound. ``episode_start`` (bool or ``(B,)``) drops the warm start;
         so does a new episode detected from the observation (its last applied input is not the
         action returned, or the ego is over 1 m from where the plan put it).
         """
-        obs, single = as_batch(observation, ob.SIZE)
+        obs, single = as_batch(observation, ob.size(len(self.scenario.objects)))
         starts = np.zeros(len(obs), dtype=bool)
         if episode_start is not None:
             flags = np.asarray(episode_start, dtype=bool).reshape(-1)
@@ -314,6 +322,20 @@ class PathFollowingMPC:
         """Risk ``(N,)`` of ego states ``(N, 4)`` against the beliefs at n = 1..N."""
         raise NotImplementedError
 
+    def _risk_terms(self) -> tuple[bool, bool]:
+        """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
+        risk in its objective (:mod:`agents.risk_budget`); neither by default."""
+        return (False, False)
+
+    def _risk_value(self, ego: ca.SX, belief: Belief, data: ca.SX) -> ca.SX:
+        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`)."""
+        raise NotImplementedError
+
+    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
+        """The risk terms' solver parameters (:data:`agents.ocp.TERMS`) of batch entry ``index``
+        (empty without terms); ``new_episode``: its memory was dropped."""
+        return np.zeros(0)
+
     # ------------------------------------------------------------------ building
     def _risk_variant(self) -> str:
         return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
@@ -326,6 +348,7 @@ class PathFollowingMPC:
                 problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty: parameters
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
+                self._risk_terms(),
             )
             build = functools.partial(
                 build_problem,
@@ -334,6 +357,8 @@ class PathFollowingMPC:
                 self.settings,
                 self._margin,
                 self._risk_parameter_shape(),
+                self._risk_value if any(self._risk_terms()) else None,
+                self._risk_terms(),
             )
             self._problems[variant] = cached_problem(key, build)
         return self._problems[variant]

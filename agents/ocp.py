@@ -82,8 +82,13 @@ NX = 6
 NU = 3
 """Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
 
+TERMS = 5
+"""Parameters of the risk terms (:mod:`agents.risk_budget`), at the end of p: the budget B, the risk
+spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
 Margin = Callable[[ca.SX, Belief, ca.SX, ca.SX, bool], ca.SX]
 """``(ego (4,), belief, epsilon, risk data, zero) -> margin``: >= 0 iff the step's risk bound holds."""
+RiskValue = Callable[[ca.SX, Belief, ca.SX], ca.SX]
+"""``(ego (4,), belief, risk data) -> R``: the agent's per-stage risk (the budget's and the cost's)."""
 Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
 """``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
 
@@ -104,11 +109,16 @@ def soft_variant(variant: str) -> str:
 
 
 def stage_functions(
-    scenario: Scenario, variant: str, margin: Margin, risk_shape: tuple[int, int]
+    scenario: Scenario,
+    variant: str,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
 ) -> dict[str, ca.Function | None]:
     """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, and ``risk`` (ego, belief, epsilon, data) -> margin
-    (None for ``"free"``)."""
+    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, belief, epsilon, data) -> margin
+    (None for ``"free"``) and, with ``value``, ``risk_value`` (ego, belief, data) -> R (None for
+    ``"free"`` or without ``value``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
     w_c1, w_c2, w_th, _ = sc.cost_weights
@@ -128,7 +138,13 @@ def stage_functions(
         risk = ca.Function(
             "risk", [ego_s, belief_s, eps_s, data_s], [row], {"is_diff_in": [True, False, False, False]}
         )
-    return {"f": f, "pose_cost": pose_cost, "risk": risk}
+    risk_value = None
+    if form != "free" and value is not None:
+        r = value(ego_s, Belief.from_array(belief_s), data_s)
+        risk_value = ca.Function(
+            "risk_value", [ego_s, belief_s, data_s], [r], {"is_diff_in": [True, False, False]}
+        )
+    return {"f": f, "pose_cost": pose_cost, "risk": risk, "risk_value": risk_value}
 
 
 def assemble(
@@ -138,11 +154,14 @@ def assemble(
     risk_shape: tuple[int, int],
     stage_cost: str,
     soft_penalty: float | None = None,
+    terms: tuple[bool, bool] = (False, False),
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
     called), its :data:`Layout` and the beliefs' function (object measurement (5,), uncertainty
     numbers) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho: soften the risk rows with slacks
-    (tagged ``(n, "s", 0)``) at cost ``rho * s_n`` (a soft variant)."""
+    (tagged ``(n, "s", 0)``) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight):
+    the :data:`TERMS` parameters at the end of p, and (with a ``risk_value`` stage function) the
+    episode budget's accumulator and row, the weighted risk in the objective (see the module)."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
@@ -156,7 +175,10 @@ def assemble(
     p_vref = sym.sym("v_ref")
     p_unc = sym.sym("uncertainty", len(uncertainty_vector(sc)))
     p_data = [sym.sym(f"risk_data_{n}", *risk_shape) for n in range(1, N + 1)]
-    p = ca.vertcat(p_obj, p_eps, p_vref, p_unc, *(ca.vec(d) for d in p_data))
+    with_terms = any(terms)
+    p_terms = sym.sym("risk_terms", TERMS) if with_terms else None
+    extra = [p_terms] if with_terms else []
+    p = ca.vertcat(p_obj, p_eps, p_vref, p_unc, *(ca.vec(d) for d in p_data), *extra)
     beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(p_unc))
     fields = [f.name for f in dataclasses.fields(Belief)]
     stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
@@ -167,6 +189,11 @@ def assemble(
     U = [sym.sym(f"u_{n}", NU) for n in range(N)]
     soft = soft_penalty is not None and risk is not None
     S = {n: sym.sym(f"s_{n}") for n in range(1, N + 1)} if soft else {}
+    value = stages.get("risk_value")
+    budget = terms[0] and value is not None
+    weight = p_terms[4] if terms[1] and value is not None else None
+    C = {n: sym.sym(f"c_{n}") for n in range(1, N + 1)} if budget else {}  # sum of R_1..R_{n-1}
+    s_budget = sym.sym("s_budget") if budget and soft else None
     w: list[Any] = []
     w_tags: list[tuple[int, str, int]] = []
     g: list[Any] = []
@@ -181,45 +208,69 @@ def assemble(
             lbg.append(lo)
             ubg.append(hi)
 
+    def ego_at(n: int) -> Any:
+        return ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
+
+    values = {}
+    if C or weight is not None:
+        values = {n: value(ego_at(n), stacked[n], p_data[n - 1]) for n in range(1, N + 1)}
+
     def add_risk(n: int) -> Any:
-        """The risk row of state n (its slack added in a soft variant); its cost term."""
+        """The risk row of state n (its slack added in a soft variant), at n = N the budget row;
+        their cost terms."""
         if risk is None:
             return 0.0
-        ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-        row = risk(ego_n, stacked[n], p_eps, p_data[n - 1])
-        if not soft:
-            add_g(row, 0.0, math.inf, n, "risk")
-            return 0.0
-        add_g(row + S[n], 0.0, math.inf, n, "risk")
-        # a violation costs more where the object is likelier (near its predicted mean, at the
-        # belief's spread widened by r_e + r_o): where the boxes cannot be kept off, the plan
-        # misses them where the object is least expected; the weight stays >= rho_n (exact)
-        b = stacked[n]
-        r2 = sc.collision_distance**2
-        z2 = (X[n][0] - b[0]) ** 2 / (b[4] ** 2 + r2) + (X[n][1] - b[1]) ** 2 / (b[5] ** 2 + r2)
-        return soft_penalty * EARLY_WEIGHT ** (N - n) * (1.0 + NEAR_WEIGHT * ca.exp(-0.5 * z2)) * S[n]
+        row = risk(ego_at(n), stacked[n], p_eps, p_data[n - 1])
+        cost = 0.0 if weight is None else weight * values[n]
+        if soft:
+            row = row + S[n]
+            # a violation costs more where the object is likelier (near its predicted mean, at the
+            # belief's spread widened by r_e + r_o): where the boxes cannot be kept off, the plan
+            # misses them where the object is least expected; the weight stays >= rho_n (exact)
+            b = stacked[n]
+            r2 = sc.collision_distance**2
+            z2 = (X[n][0] - b[0]) ** 2 / (b[4] ** 2 + r2) + (X[n][1] - b[1]) ** 2 / (b[5] ** 2 + r2)
+            near = 1.0 + NEAR_WEIGHT * ca.exp(-0.5 * z2)
+            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near * S[n]
+        add_g(row, 0.0, math.inf, n, "risk")
+        if C and n == N:  # (B - spent - sum_n R_n) * normaliser + switch-off >= backoff
+            left = (p_terms[0] - p_terms[1] - C[N] - values[N]) * p_terms[2] + p_terms[3]
+            add_g(left + s_budget if soft else left, 0.0, math.inf, N, "risk")
+            cost += soft_penalty * s_budget if soft else 0.0
+        return cost
 
     def add_slack(n: int) -> None:
-        """The slack of row n, a control of stage n (after u_n; after x_N for n = N)."""
+        """The slack of row n, a control of stage n (after u_n; after x_N for n = N; the budget
+        row's after that)."""
         if n in S:
             w.append(S[n])
             w_tags.append((n, "s", 0))
+        if n == N and s_budget is not None:
+            w.append(s_budget)
+            w_tags.append((N, "s", 1))
+
+    def add_accumulator(n: int) -> None:
+        """c_{n+1} = c_n + R_n (c_1 = 0), the gap row's last component: stage-local."""
+        if C and n < N:
+            add_g(C[n + 1] - (C[n] + values[n] if n >= 1 else 0.0), 0.0, 0.0, n, "accumulate")
 
     # --- objective, dynamics, rate limits and risk, stage-wise
     cost = 0.0
     for n in range(N):
-        w += [X[n], U[n]]
-        w_tags += [(n, "x", i) for i in range(NX)] + [(n, "u", i) for i in range(NU)]
+        w += [X[n], *([C[n]] if n in C else []), U[n]]
+        w_tags += [(n, "x", i) for i in range(NX)] + ([(n, "c", 0)] if n in C else [])
+        w_tags += [(n, "u", i) for i in range(NU)]
         add_slack(n)
         add_g(X[n + 1] - f(X[n], U[n]), 0.0, 0.0, n, "gap")
+        add_accumulator(n)
         add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
             cost += add_risk(n)
         cost += w_v * (U[n][2] - p_vref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
-    w.append(X[N])
-    w_tags += [(N, "x", i) for i in range(NX)]
+    w += [X[N], *([C[N]] if C else [])]
+    w_tags += [(N, "x", i) for i in range(NX)] + ([(N, "c", 0)] if C else [])
     add_slack(N)
     cost += add_risk(N)
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}

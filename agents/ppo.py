@@ -3,7 +3,7 @@
 A policy trained by ``python -m benchmarks.train_ppo`` acts through two fixed maps, used alike in
 training (as Gymnasium vector wrappers) and by :class:`PPOAgent`:
 
-- :func:`features`: the 15-float observation -> 14 scaled features in the ego's frame (path
+- :func:`features`: the observation -> 14 scaled features in the ego's frame (path
   error, own input, the object's relative position, heading and velocity, distance, progress);
 - :func:`to_inputs`: the policy's action in [-1, 1]^2 -> the change of ``(v, omega)`` within one
   step's rate limits (``accel_max dt``, ``omega_rate_max dt``), clipped to the input limits, so a
@@ -45,13 +45,15 @@ def shipped_model(variant: str) -> Path:
 
 
 def features(obs: np.ndarray) -> np.ndarray:
-    """Scaled features ``(B, 14)`` float32 of observations ``(B, 15)`` (or ``(14,)`` of ``(15,)``)."""
+    """Scaled features ``(B, 14)`` float32 of observations ``(B, 10 + 6 K)`` (or ``(14,)`` of one),
+    of the first present object (the policies are trained on one); ``ValueError`` for an
+    observation without any."""
     o = np.asarray(obs, dtype=float)
     single = o.ndim == 1
     o = np.atleast_2d(o)
-    x, y, theta = (o[:, i] for i in range(3))
-    v, omega = o[:, 3], o[:, 4]
-    ox, oy, otheta, ov = (o[:, i] for i in (5, 6, 7, 8))
+    x, y, theta = o[:, layout.EGO_POSE].T
+    v, omega = o[:, layout.EGO_INPUT].T
+    ox, oy, otheta, ov = first_object(o)
     c, s = np.cos(theta), np.sin(theta)
     dx, dy = ox - x, oy - y
     rel_heading = otheta - theta
@@ -76,6 +78,17 @@ def features(obs: np.ndarray) -> np.ndarray:
     )
     out = (raw / _SCALE).astype(np.float32)
     return out[0] if single else out
+
+
+def first_object(obs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``(c1, c2, theta, v)`` ``(B,)`` each of the first present object of observations ``(B, 10 + 6 K)``."""
+    table = obs[:, layout.EGO_SIZE :].reshape(len(obs), layout.slot_count(obs.shape[1]), layout.SLOT_SIZE)
+    present = table[:, :, 0] == 1.0
+    empty = ~present.any(axis=1)
+    if empty.any():
+        raise ValueError(f"observation(s) {np.flatnonzero(empty).tolist()} hold no object: all slots absent")
+    first = table[np.arange(len(obs)), np.argmax(present, axis=1)]
+    return first[:, 1], first[:, 2], first[:, 3], first[:, 4]
 
 
 @dataclass(frozen=True)
@@ -109,8 +122,9 @@ def to_inputs(action: np.ndarray, last_input: np.ndarray, limits: InputLimits) -
 class PPOAgent:
     """A trained stable-baselines3 PPO policy with the MPC agents' ``predict`` API.
 
-    ``predict`` takes RiskCrossing-v0 observations ``(15,)`` or ``(B, 15)`` and returns inputs in
-    physical units ``(2,)`` or ``(B, 2)``, within the scenario's input and rate limits.
+    ``predict`` takes RiskCrossing-v0 observations ``(10 + 6 K,)`` or ``(B, 10 + 6 K)`` (any K;
+    the policy sees the first present object, :func:`features`) and returns inputs in physical
+    units ``(2,)`` or ``(B, 2)``, within the scenario's input and rate limits.
     """
 
     def __init__(self, model: Any, limits: InputLimits, metadata: dict[str, Any] | None = None) -> None:
@@ -160,8 +174,10 @@ class PPOAgent:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, None]:
-        """Inputs for ``observation (15,)`` or ``(B, 15)``; raises on a wrong shape or a NaN."""
-        obs, single = as_batch(observation, layout.SIZE)
+        """Inputs for ``observation (10 + 6 K,)`` or ``(B, 10 + 6 K)``; raises on a wrong shape or a NaN."""
+        length = np.shape(observation)[-1] if np.ndim(observation) else 0
+        size = layout.size(layout.slot_count(length)) if length > layout.SIZE else layout.SIZE
+        obs, single = as_batch(observation, size)
         if not np.all(np.isfinite(obs)):
             raise ValueError(f"observation has non-finite entries: {observation}")
         action, _ = self.model.predict(features(obs), deterministic=deterministic)

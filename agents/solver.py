@@ -49,6 +49,7 @@ from agents.ocp import (
     SOFT,
     STAGE_COSTS,
     Margin,
+    RiskValue,
     assemble,
     stage_functions,
     uncertainty_vector,
@@ -219,6 +220,10 @@ class Problem:
     """Whether the solver's functions were compiled."""
     times: CallTimes
     """The rungs' limits and the measured time per iteration (shared by the cached copies)."""
+    acc_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
+    acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Rows of g of c_{n+1} = c_n + R_n, n = 0..N-1 (empty without a budget)."""
 
     @property
     def n_w(self) -> int:
@@ -248,17 +253,24 @@ def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Proble
 
 
 def build_problem(
-    scenario: Scenario, variant: str, settings: SolverSettings, margin: Margin, risk_shape: tuple[int, int]
+    scenario: Scenario,
+    variant: str,
+    settings: SolverSettings,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
+    terms: tuple[bool, bool] = (False, False),
 ) -> Problem:
     """Build the NLP of :mod:`agents.ocp` for ``variant`` and its solver (compiled with
-    ``settings.jit`` where a C compiler works)."""
+    ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the risk budget and weight
+    (:func:`agents.ocp.assemble`)."""
     t0 = time.perf_counter()
     N = scenario.horizon
-    stages = stage_functions(scenario, variant, margin, risk_shape)
+    stages = stage_functions(scenario, variant, margin, risk_shape, value)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
     penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms
     )
 
     base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
@@ -272,7 +284,7 @@ def build_problem(
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
         # code holds the risk row and its derivatives once instead of N times; every rung loads
         # the one library, whose compiled "nlp" leaves nothing to expand
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty)
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms)
         base["expand"] = False
         library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
         jit = library is not None
@@ -323,6 +335,8 @@ def build_problem(
         build_time=time.perf_counter() - t0,
         jit=jit,
         times=CallTimes(limits, prior, failing),
+        acc_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "c"], dtype=int),
+        acc_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "accumulate"], dtype=int),
     )
 
 
@@ -350,6 +364,7 @@ def iteration_time(
             np.zeros(N * risk_shape[0] * risk_shape[1]),
         ]
     )
+    p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
     lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0)
     w0 = np.zeros(n_w)
     w0[x_index] = x0

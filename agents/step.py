@@ -59,6 +59,7 @@ class Step:
                 [agent._epsilon, sc.ego.v_ref],
                 uncertainty,
                 *(d.ravel(order="F") for d in self.data),
+                agent._terms_parameters(index, self.memory is None),
             ]
         )
         self.tally = Tally()
@@ -128,7 +129,8 @@ class Step:
         if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
             inputs, iterations = planned
             self.tally.iterations += iterations
-            head = [(guesses.pack(pr, guesses.rollout(pr, self.x0, inputs), inputs), None, None)]
+            w0 = guesses.pack(pr, guesses.rollout(pr, self.x0, inputs), inputs)
+            head = [(guesses.fill_accumulators(pr, w0, self.p), None, None)]
             out, calls = self.solve(pr, head, reserve)
             if out is not None or calls == 0:
                 return out, False

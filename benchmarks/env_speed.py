@@ -15,7 +15,9 @@ It prints two tables (and writes them to ``OUT/env_speed.txt``, ``env_speed_near
   evaluation for a single ego state (us) and for a batch of B ego states (ms), numpy, against the
   object's one-step belief (Monte Carlo with the scenario's J = ``mc_samples``). ``exact, sampled``
   is the exact estimator with ``object_motion="sampled"``; ``(no risk)`` replaces the estimator by
-  a stub, so it shows what the env costs around the risk.
+  a stub, so it shows what the env costs around the risk; ``exact, 4 objects`` (and ``(no risk),
+  4 objects``) steps the ``"four_crossing"`` scene (:mod:`risk_env.scenes`), four objects with
+  four risk terms per step.
 
 Each repetition times every env in turn, so that a busy machine slows them alike; shown is the best
 of R repetitions (time.perf_counter). The ratios travel between machines; the absolute times do not.
@@ -72,7 +74,7 @@ def stepper(env_id: str, steps: int, **kwargs: Any) -> Callable[[], None]:
     no_risk = kwargs.pop("estimator", None) == "none"
     env = gym.make(env_id, **kwargs)
     if no_risk:
-        env.unwrapped.estimator = _NoRisk()
+        env.unwrapped.estimators = (_NoRisk(),) * len(env.unwrapped.estimators)
     if env_id == ENV_ID:
         actions = [np.array([env.unwrapped.scenario.ego.v_ref, 0.0], dtype=np.float32)] * steps
     else:
@@ -159,6 +161,8 @@ def main(argv: list[str] | None = None) -> str:
     ours = {name: {"risk_estimator": name} for name in ESTIMATOR_NAMES}
     ours["exact, sampled"] = {"risk_estimator": "exact", "object_motion": "sampled"}
     ours["(no risk)"] = {"estimator": "none"}
+    ours["exact, 4 objects"] = {"risk_estimator": "exact", "scene": "four_crossing"}
+    ours["(no risk), 4 objects"] = {"estimator": "none", "scene": "four_crossing"}
     envs = {name: stepper(name, args.steps) for name in REFERENCES}
     envs.update({label: stepper(ENV_ID, args.steps, **kwargs) for label, kwargs in ours.items()})
     times = step_times(envs, args.steps, args.repeat)
@@ -169,18 +173,18 @@ def main(argv: list[str] | None = None) -> str:
         f" {np.__version__}, gym.make with default wrappers, J = {scenario.mc_samples},"
         f" L = {scenario.grid_points}; best of {args.repeat} x {args.steps} steps)",
         "",
-        f"{'reference':<16}{'env steps/s':>13}{'us/step':>10}",
+        f"{'reference':<22}{'env steps/s':>13}{'us/step':>10}",
     ]
-    lines += [f"{name:<16}{1.0 / times[name]:>13,.0f}{1e6 * times[name]:>10.1f}" for name in REFERENCES]
+    lines += [f"{name:<22}{1.0 / times[name]:>13,.0f}{1e6 * times[name]:>10.1f}" for name in REFERENCES]
     header = (
-        f"{'estimator':<16}{'env steps/s':>13}{'us/step':>10}{'x CartPole':>12}{'x Pendulum':>12}"
+        f"{'estimator':<22}{'env steps/s':>13}{'us/step':>10}{'x CartPole':>12}{'x Pendulum':>12}"
         f"{'risk, 1 state [us]':>21}{f'risk, {args.batch} states [ms]':>24}"
     )
     lines += ["", header, "-" * len(header)]
     cartpole, pendulum = (times[name] for name in REFERENCES)
     for label in ours:
         t = times[label]
-        row = f"{label:<16}{1.0 / t:>13,.0f}{1e6 * t:>10.1f}{t / cartpole:>12.2f}{t / pendulum:>12.2f}"
+        row = f"{label:<22}{1.0 / t:>13,.0f}{1e6 * t:>10.1f}{t / cartpole:>12.2f}{t / pendulum:>12.2f}"
         if label in ESTIMATOR_NAMES:
             t_single, t_batch = risk_times(label, scenario, args.batch, args.repeat, args.near_only)
             row += f"{1e6 * t_single:>21.1f}{1e3 * t_batch:>24.2f}"

@@ -1,8 +1,9 @@
 """The paper's Fig. 3 (trajectories) and Fig. 4 (ego speeds) from Table II runs, as PNG.
 
 Each panel names its agent and risk method. Every mark is in the legend: the reference path, the
-ego's start, each run's trajectory (a colour, line style and marker per uncertainty level), the
-object's path, the object where it is at each run's last step, and a cross where a run collided.
+ego's start, each run's trajectory (a colour, line style and marker per uncertainty level), each
+object's path, each object where it is at each run's last step, and a cross where a run collided.
+Scenes with several objects (``--scene``) draw every one of them.
 Runs that coincide are labelled ``(same as ...)`` and stay visible through their line styles.
 """
 
@@ -33,6 +34,8 @@ DASHES = {"low": (0, (5, 2)), "medium": (0, (3, 1, 1, 1)), "high": (0, (1, 1))}
 """Line styles of the highest tolerance's speeds in Fig. 4, one per level."""
 MARKER_STEPS = 3
 """Markers every 1.5 s (3 steps of 0.5 s), as in the paper's Fig. 3."""
+VIEW_LIMITS = (-30.0, 50.0)
+"""Fig. 3 shows c2 [m] within these at most, however far the objects run."""
 PREFERRED = {"RMPC": "worst_case", "SMPC": "exact"}
 """The risk method drawn for each MPC when the runs hold several."""
 
@@ -82,17 +85,31 @@ def _legend_extras() -> list[Line2D]:
     ]
 
 
-def trajectories(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: Path) -> Path:
-    """Fig. 3: ego trajectories of each MPC at the lowest and highest tolerance."""
+def _objects(arrays: dict[str, np.ndarray], r: dict[str, Any]) -> np.ndarray:
+    """The run's objects ``(steps+1, M, 4)``: ``objects`` when stored (several), else ``object``."""
+    key = _key(r, "objects")
+    return arrays[key] if key in arrays else arrays[_key(r, "object")][:, None, :]
+
+
+def trajectories(
+    rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: Path, scenario: Scenario | None = None
+) -> Path:
+    """Fig. 3: ego trajectories of each MPC at the lowest and highest tolerance (``scenario``: the
+    runs' path, discs and objects; default the paper's)."""
     tolerances = sorted({r["epsilon"] for r in rows})
     shown = [tolerances[0], tolerances[-1]] if len(tolerances) > 1 else tolerances
     methods = [m for m in ("RMPC", "SMPC") if any(r["method"] == m for r in rows)]
-    scenario = Scenario()
+    scenario = Scenario() if scenario is None else scenario
+    radii = [o.radius for o in scenario.objects]
     lam = np.linspace(scenario.path.lambda_start, 5.0, 300)
     px, py, _ = ref_path.point(scenario.path, lam)
-    ends = [arrays[_key(r, "object")][-1, 1] for r in rows if r["method"] in methods]
-    top = max(38.0, max(ends, default=0.0) + scenario.object.radius + 3.0)
-    height = 6.4 * (top + 12.0) / 100.0 + 0.9  # equal aspect over c1 in [-30, 70], plus labels
+    drawn = [_objects(arrays, r) for r in rows if r["method"] in methods]
+    ends = [o[-1, i, 1] + radii[i] for o in drawn for i in range(o.shape[1])]
+    # the view: the paper's, grown to the objects' paths up to VIEW_LIMITS (objects run on beyond)
+    top = max(38.0, max(ends, default=0.0) + 3.0, *(o[:, :, 1].max() + 3.0 for o in drawn))
+    bottom = min(-12.0, *(o[:, :, 1].min() - 3.0 for o in drawn))
+    bottom, top = max(bottom, VIEW_LIMITS[0]), min(top, VIEW_LIMITS[1])
+    height = 6.4 * (top - bottom) / 100.0 + 0.9  # equal aspect over c1 in [-30, 70], plus labels
     fig, axes = plt.subplots(
         len(shown),
         len(methods),
@@ -106,19 +123,20 @@ def trajectories(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out:
             risk, runs = _pick(rows, method, eps)
             ax.plot(px, py, "k--", lw=1, label="reference path")
             egos = [arrays[_key(r, "ego")] for r in runs]
-            objects = [arrays[_key(r, "object")] for r in runs]
+            objects = [_objects(arrays, r) for r in runs]
             if objects:
                 longest = max(objects, key=len)
-                ax.plot(
-                    longest[:, 0],
-                    longest[:, 1],
-                    color="0.5",
-                    lw=1,
-                    marker="s",
-                    ms=2.5,
-                    markevery=MARKER_STEPS,
-                    label="object path",
-                )
+                for k in range(longest.shape[1]):
+                    ax.plot(
+                        longest[:, k, 0],
+                        longest[:, k, 1],
+                        color="0.5",
+                        lw=1,
+                        marker="sDv^"[k % 4],
+                        ms=2.5,
+                        markevery=MARKER_STEPS,
+                        label="object path" if longest.shape[1] == 1 else f"object {k} path",
+                    )
             twins = _twins(egos, [r["uncertainty"] for r in runs])
             for r, ego, obj, twin in zip(runs, egos, objects, twins):
                 style = STYLES[r["uncertainty"]]
@@ -136,9 +154,10 @@ def trajectories(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out:
                     label=f"{r['uncertainty']}{twin}: d_min {r['d_min']:.1f} m{collided}",
                     zorder=3 if twin else 2,
                 )
-                ax.add_patch(
-                    Circle(obj[-1, :2], scenario.object.radius, fc="none", ec=style["color"], ls="--", lw=1.2)
-                )
+                for k in range(obj.shape[1]):
+                    if np.any(obj[-1, k]):  # an absent object's row is zeros
+                        at, colour = obj[-1, k, :2], style["color"]
+                        ax.add_patch(Circle(at, radii[k], fc="none", ec=colour, ls="--", lw=1.2))
                 if r["collided"]:
                     ax.plot(*ego[-1, :2], "x", color=style["color"], ms=style["cross"], mew=2, zorder=4)
             ax.add_patch(
@@ -149,13 +168,15 @@ def trajectories(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out:
             ax.set_title(f"{method}, {risk} risk, epsilon = {eps:g} J")
             ax.set_aspect("equal")
             ax.set_xlim(-30, 70)
-            ax.set_ylim(-12, top)
+            ax.set_ylim(bottom, top)
             ax.set_xlabel("c1 [m]")
             ax.set_ylabel("c2 [m]")
             ax.grid(alpha=0.3)
+    count = len(scenario.objects)
     fig.suptitle(
-        "Fig. 3: ego trajectories by uncertainty level (marks every 1.5 s); the object where it is"
-        " at each run's last step"
+        "Fig. 3: ego trajectories by uncertainty level (marks every 1.5 s); "
+        + ("the object where it is" if count == 1 else f"the {count} objects where they are")
+        + " at each run's last step"
     )
     path = out / "fig3_trajectories.png"
     fig.savefig(path, dpi=110)
@@ -163,12 +184,14 @@ def trajectories(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out:
     return path
 
 
-def velocities(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: Path) -> Path:
+def velocities(
+    rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: Path, scenario: Scenario | None = None
+) -> Path:
     """Fig. 4: the ego's applied speed over time, at the lowest and highest tolerance."""
     tolerances = sorted({r["epsilon"] for r in rows})
     shown = [tolerances[0], tolerances[-1]] if len(tolerances) > 1 else tolerances
     methods = [m for m in ("RMPC", "SMPC") if any(r["method"] == m for r in rows)]
-    scenario = Scenario()
+    scenario = Scenario() if scenario is None else scenario
     fig, axes = plt.subplots(1, len(methods), figsize=(6.8 * len(methods), 4.0), squeeze=False)
     for j, method in enumerate(methods):
         ax = axes[0, j]
@@ -298,9 +321,15 @@ def at_a_glance(rows: list[dict[str, Any]], out: Path) -> Path:
     return path
 
 
-def paper_figures(rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: Path) -> list[Path]:
-    """Write ``fig3_trajectories.png``, ``fig4_velocities.png`` and ``table2_at_a_glance.png``;
-    returns their paths."""
+def paper_figures(
+    rows: list[dict[str, Any]], arrays: dict[str, np.ndarray], out: Path, scenario: Scenario | None = None
+) -> list[Path]:
+    """Write ``fig3_trajectories.png``, ``fig4_velocities.png`` and ``table2_at_a_glance.png``
+    (``scenario``: the runs' scene, default the paper's); returns their paths."""
     if not rows or not any(r["method"] in PREFERRED for r in rows):
         return []
-    return [trajectories(rows, arrays, out), velocities(rows, arrays, out), at_a_glance(rows, out)]
+    return [
+        trajectories(rows, arrays, out, scenario),
+        velocities(rows, arrays, out, scenario),
+        at_a_glance(rows, out),
+    ]

@@ -52,7 +52,7 @@ class EpisodeRecord:
     ego: np.ndarray
     """(steps+1, 4) ego (c1 [m], c2 [m], theta [rad], v [m/s])."""
     object: np.ndarray
-    """(steps+1, 4) object (c1, c2, theta, v)."""
+    """(steps+1, 4) the first object (c1, c2, theta, v)."""
     actions: np.ndarray
     """(steps, 2) applied (v [m/s], omega [rad/s])."""
     risk: np.ndarray
@@ -60,7 +60,7 @@ class EpisodeRecord:
     path_error: np.ndarray
     """(steps+1, 4) e_k, the first at the start state."""
     distance: np.ndarray
-    """(steps+1,) centre distance ego-object [m]."""
+    """(steps+1,) centre distance ego-object [m], the nearest object's."""
     solve_time: np.ndarray
     """(steps,) agent's solve (or predict) time [s]."""
     fallback: np.ndarray
@@ -74,6 +74,10 @@ class EpisodeRecord:
     """(steps,) the agent's ``last_solve`` after each step (None for agents without one)."""
     info: dict[str, Any] = field(default_factory=dict)
     """The env's ``info`` after the last step (``episode_risk``: the episode's summed risk)."""
+    objects: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 4)))
+    """(steps+1, M, 4) every object (c1, c2, theta, v), zeros where absent (``info["objects"]``)."""
+    risk_terms: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    """(steps, M) each object's share R_i of ``risk``."""
 
     @property
     def steps(self) -> int:
@@ -109,7 +113,7 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
     obs, info = env.reset(seed=seed)
     if hasattr(agent, "reset"):
         agent.reset()
-    ego, obj = [info["ego"]], [info["object"]]
+    ego, obj, objects, terms = [info["ego"]], [info["object"]], [info["objects"]], []
     errors, dist = [info["path_error"]], [info["distance"]]
     actions, risks, times, kinds, reports = [], [], [], [], []
     state, start = None, True
@@ -128,6 +132,8 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         risks.append(info["risk"])
         ego.append(info["ego"])
         obj.append(info["object"])
+        objects.append(info["objects"])
+        terms.append(info["risk_terms"])
         errors.append(info["path_error"])
         dist.append(info["distance"])
     return EpisodeRecord(
@@ -145,4 +151,6 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
         epsilon=float(env.unwrapped.scenario.risk_tolerance),
         reports=reports,
         info=info,
+        objects=np.array(objects),
+        risk_terms=np.array(terms).reshape(-1, len(objects[0])),
     )

@@ -278,15 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=Path("results"),
         help="output folder (the committed run is in docs/results/stress/)",
     )
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="",
-        default=False,
-        metavar="ADDRESS",
-        help="run on Ray (an address, or local)",
-    )
+    cli.add_sweep_options(p)
     return p
 
 

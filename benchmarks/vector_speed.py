@@ -4,6 +4,7 @@ timed in the same run.
     python -m benchmarks.vector_speed                        # 1, 64 and 1,024 copies, exact risk
     python -m benchmarks.vector_speed --num-envs 1 8 64 --modes vector_entry_point sync async
     python -m benchmarks.vector_speed --repeats 10 --out docs/results
+    python -m benchmarks.vector_speed --objects 1 2 4 --modes vector_entry_point
 
 Random actions (the same for every mode) drive the copies, with seeded variations of the scenario
 (``randomize=True``) so that the batch holds states near and far from the object; sampled object
@@ -16,6 +17,8 @@ Python floats), ``numpy`` (the same env held to its numpy path, shown up to 64 c
 ``sync`` and ``async`` vector envs of single envs (up to ``--max-wrapped`` copies), and
 ``CartPole-v1`` (Gymnasium's own batched CartPole, for scale). The summary gives the fixed cost
 (a batch step of 1 copy) and the cost per copy (from the smallest and largest batch).
+``--objects``: the scenes timed by their number of objects (1: the paper's, 2: ``"two_crossing"``,
+4: ``"four_crossing"``; :mod:`risk_env.scenes`); the targets are for one object.
 """
 
 from __future__ import annotations
@@ -31,12 +34,16 @@ import numpy as np
 import risk_env
 from benchmarks import cli
 from benchmarks.env_speed import REFERENCES, step_times, stepper
+from risk_env.scenario import Scenario
+from risk_env.scenes import SCENE_NAMES
 
 MODES = ("vector_entry_point", "numpy", "sync", "async", "CartPole-v1")
 TARGETS = ((64, 100_000), (1024, 500_000))
 """Issue 15's targets for the batched env (exact risk, sampled motion): env steps/s at these
 batch sizes; and a fixed cost of at most :data:`FIXED_COST` [s]."""
 FIXED_COST = 100e-6
+SCENES_BY_COUNT = {len(Scenario.preset(scene=name).objects): name for name in reversed(SCENE_NAMES)}
+"""The scene timed for each number of objects (the first scene with that many)."""
 
 
 def batch_stepper(mode: str, num_envs: int, steps: int, **env_kwargs) -> tuple[Callable[[], float], gym.Env]:
@@ -80,6 +87,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--object-motion", choices=risk_env.OBJECT_MOTIONS, default="sampled", help="the object's true motion"
     )
+    parser.add_argument(
+        "--objects",
+        type=int,
+        nargs="+",
+        choices=sorted(SCENES_BY_COUNT),
+        default=[1, 4],
+        help="objects per scene (1: paper, 2: two_crossing, 4: four_crossing)",
+    )
     parser.add_argument("--steps", type=int, default=200, help="batch steps per run")
     parser.add_argument("--repeats", type=int, default=5, help="runs per row (the best is kept)")
     parser.add_argument("--max-wrapped", type=int, default=64, help="most copies for sync and async")
@@ -102,21 +117,28 @@ def main(argv: list[str] | None = None) -> str:
     reference_steps = 2000
     references = {name: stepper(name, reference_steps) for name in REFERENCES}
     ref = dict.fromkeys(REFERENCES, float("inf"))
-    rows: dict[tuple[str, str, int], float] = {}
+    rows: dict[tuple[str, str, int, int], float] = {}
     runners = {}
-    for estimator in args.estimators:
-        for num_envs in args.num_envs:
-            for mode in args.modes:
-                if mode in ("sync", "async") and num_envs > args.max_wrapped:
-                    continue
-                if mode == "numpy" and num_envs > 64:
-                    continue
-                if mode == "CartPole-v1" and estimator != args.estimators[0]:
-                    continue
-                kwargs = {"risk_estimator": estimator, "randomize": True, "object_motion": args.object_motion}
-                key = (mode, "-" if mode == "CartPole-v1" else estimator, num_envs)
-                runners[key] = batch_stepper(mode, num_envs, args.steps, **kwargs)
-                rows[key] = float("inf")
+    for count in args.objects:
+        for estimator in args.estimators:
+            for num_envs in args.num_envs:
+                for mode in args.modes:
+                    if mode in ("sync", "async") and num_envs > args.max_wrapped:
+                        continue
+                    if mode == "numpy" and num_envs > 64:
+                        continue
+                    first = estimator == args.estimators[0] and count == args.objects[0]
+                    if mode == "CartPole-v1" and not first:
+                        continue
+                    kwargs = {
+                        "risk_estimator": estimator,
+                        "randomize": True,
+                        "object_motion": args.object_motion,
+                        "scene": SCENES_BY_COUNT[count],
+                    }
+                    key = (mode, "-" if mode == "CartPole-v1" else estimator, count, num_envs)
+                    runners[key] = batch_stepper(mode, num_envs, args.steps, **kwargs)
+                    rows[key] = float("inf")
     for round_ in range(args.repeats):  # every row once per round: a busy spell slows them alike
         for name, t in step_times(references, reference_steps, 1).items():
             ref[name] = min(ref[name], t)
@@ -135,13 +157,14 @@ def main(argv: list[str] | None = None) -> str:
         "reference (gym.make, one env)   us/step",
         *(f"{name:<32}{1e6 * ref[name]:>8.1f}" for name in REFERENCES),
         "",
-        f"{'mode':>20} {'estimator':>10} {'copies':>7} {'batch step [us]':>16} {'env steps/s':>12}"
-        f" {'us/env step':>12} {'x CartPole':>11} {'x Pendulum':>11}",
+        f"{'mode':>20} {'estimator':>10} {'objects':>8} {'copies':>7} {'batch step [us]':>16}"
+        f" {'env steps/s':>12} {'us/env step':>12} {'x CartPole':>11} {'x Pendulum':>11}",
     ]
-    for (mode, estimator, num_envs), t in rows.items():
+    for (mode, estimator, count, num_envs), t in rows.items():
         per = t / num_envs
+        shown = "-" if mode == "CartPole-v1" else count
         lines.append(
-            f"{mode:>20} {estimator:>10} {num_envs:>7} {1e6 * t:>16.1f} {1.0 / per:>12,.0f}"
+            f"{mode:>20} {estimator:>10} {shown:>8} {num_envs:>7} {1e6 * t:>16.1f} {1.0 / per:>12,.0f}"
             f" {1e6 * per:>12.2f} {per / cartpole:>11.3f} {per / pendulum:>11.3f}"
         )
     lines += ["", *summary(rows, args.estimators, pendulum)]
@@ -153,22 +176,30 @@ def main(argv: list[str] | None = None) -> str:
     return text
 
 
-def summary(rows: dict[tuple[str, str, int], float], estimators: list[str], pendulum: float) -> list[str]:
-    """Fixed cost and cost per copy of the batched env per estimator, and issue 15's targets."""
+def summary(
+    rows: dict[tuple[str, str, int, int], float], estimators: list[str], pendulum: float
+) -> list[str]:
+    """Fixed cost and cost per copy of the batched env per estimator and number of objects, and
+    issue 15's targets (one object); with several objects, their cost beside one object's."""
     out = []
-    for estimator in estimators:
+    counts = sorted({c for (m, _, c, _) in rows if m != "CartPole-v1"})
+    for estimator, count in ((e, c) for e in estimators for c in counts):
         for mode in ("vector_entry_point", "numpy"):
-            times = {n: t for (m, e, n), t in rows.items() if m == mode and e == estimator}
+            times = {n: t for (m, e, c, n), t in rows.items() if m == mode and e == estimator and c == count}
             if not times:
                 continue
             lo, hi = min(times), max(times)
-            line = f"{mode} ({estimator}): fixed cost {1e6 * times[lo]:.1f} us (a batch of {lo})"
+            objects = f", {count} object{'s' if count > 1 else ''}"
+            line = f"{mode} ({estimator}{objects}): fixed cost {1e6 * times[lo]:.1f} us (a batch of {lo})"
             line += f" = {times[lo] / pendulum:.2f} Pendulum-v1 steps"
             if hi > lo:
                 per_copy = (times[hi] - times[lo]) / (hi - lo)
                 line += f"; per copy {1e6 * per_copy:.2f} us (batches of {lo} and {hi})"
+            single = rows.get((mode, estimator, 1, hi))
+            if count > 1 and single is not None:
+                line += f"; {times[hi] / single:.2f}x one object's batch step at {hi} copies"
             out.append(line)
-            if mode != "vector_entry_point" or estimator != "exact":
+            if mode != "vector_entry_point" or estimator != "exact" or count != 1:
                 continue
             checks = []
             if 1 in times:

@@ -71,7 +71,19 @@ def scenario_fields() -> str:
     rows = ["| keyword | field | default | meaning |", "| --- | --- | --- | --- |"]
     for field in dataclasses.fields(Scenario):
         value = getattr(default, field.name)
-        if dataclasses.is_dataclass(value):
+        if field.name == "objects":  # the list, then the first object's fields by their flat names
+            docs = attribute_docs(Scenario)
+            meaning = _cell(docs.get("objects", ""))
+            rows.append(f"| `objects` | `objects` | the paper's one object | {meaning} |")
+            first = value[0]
+            docs = attribute_docs(type(first))
+            for sub in dataclasses.fields(first):
+                if ("object", sub.name) in flat:
+                    rows.append(
+                        f"| `{flat[('object', sub.name)]}` | `objects[0].{sub.name}` |"
+                        f" `{_default(getattr(first, sub.name))}` | {_cell(docs.get(sub.name, ''))} |"
+                    )
+        elif dataclasses.is_dataclass(value):
             docs = attribute_docs(type(value))
             for sub in dataclasses.fields(value):
                 name = flat.get((field.name, sub.name), "")

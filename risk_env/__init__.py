@@ -1,4 +1,5 @@
-"""RiskCrossing: the paper's crossing-object scenario, its models and risk estimators.
+"""RiskCrossing: the paper's crossing-object scenario (one road user or several), its models and
+risk estimators.
 
 Importing the package registers ``"RiskCrossing-v0"`` with Gymnasium (safe to import twice), with
 its batched numpy form as the ``vector_entry_point`` of ``gym.make_vec``.
@@ -7,6 +8,7 @@ its batched numpy form as the ``vector_entry_point`` of ``gym.make_vec``.
 import gymnasium as _gym
 
 from risk_env.env import ENV_ID, OBJECT_MOTIONS, RiskCrossingEnv
+from risk_env.parts import CrossingObject
 from risk_env.prediction import Belief, predict, predict_array
 from risk_env.risk import (
     ESTIMATOR_NAMES,
@@ -17,7 +19,9 @@ from risk_env.risk import (
     make_estimator,
 )
 from risk_env.scenario import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
+from risk_env.scenes import SCENE_NAMES
 from risk_env.severity import Severity, make_severity
+from risk_env.total_risk import make_estimators
 from risk_env.variations import Variations
 
 __all__ = [
@@ -25,8 +29,10 @@ __all__ = [
     "ESTIMATOR_NAMES",
     "OBJECT_MOTIONS",
     "RISK_TOLERANCES",
+    "SCENE_NAMES",
     "UNCERTAINTY_PRESETS",
     "Belief",
+    "CrossingObject",
     "ExactRisk",
     "MonteCarloRisk",
     "RiskCrossingEnv",
@@ -36,6 +42,7 @@ __all__ = [
     "Variations",
     "WorstCaseRisk",
     "make_estimator",
+    "make_estimators",
     "make_severity",
     "predict",
     "predict_array",

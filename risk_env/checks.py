@@ -19,6 +19,7 @@ TypeError: risk_tolerance must be a real number (int or float), got '500' (str)
 from __future__ import annotations
 
 import difflib
+import math
 import numbers
 import operator
 from collections.abc import Iterable, Mapping, Sequence
@@ -67,6 +68,32 @@ def real(name: str, value: Any) -> float:
         return float(value)
     except OverflowError:
         raise ValueError(f"{name} must be finite, got {value!r}") from None
+
+
+def finite(name: str, value: Any) -> float:
+    """``value`` as a float if it is a finite real number, else an error naming ``name``."""
+    out = real(name, value)
+    if not math.isfinite(out):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return out
+
+
+def positive(name: str, value: Any, strict: bool = True) -> float:
+    """``value`` as a float if it is finite and > 0 (``strict=False``: >= 0), else an error naming
+    ``name``."""
+    out = finite(name, value)
+    if out < 0 or (strict and out == 0):
+        bound = "> 0" if strict else ">= 0"
+        raise ValueError(f"{name} must be {bound}, got {value!r}")
+    return out
+
+
+def finite_reals(name: str, value: Any, length: int) -> tuple[float, ...]:
+    """:func:`reals`, each entry finite; errors name ``name[i]``."""
+    out = reals(name, value, length)
+    for i, v in enumerate(out):
+        finite(f"{name}[{i}]", v)
+    return out
 
 
 def integer(name: str, value: Any, minimum: int | None = None) -> int:
@@ -141,6 +168,30 @@ def real_array(value: Any, name: str, expected: str) -> np.ndarray:
         found = _KIND_NAMES.get(kind, f"dtype {a.dtype}")
         raise ValueError(f"{name} must be {expected}, got {describe(value)} with {found}{_REAL_ONLY}")
     return a.astype(np.float64, copy=False)
+
+
+def ego_action(action: Any, ego: Any) -> tuple[float, float]:
+    """``action`` as ``(v, omega)`` floats if the env's action Box of ``ego`` (a
+    :class:`~risk_env.parts.Ego`) holds it (up to :func:`slack`); else ``ValueError`` naming it."""
+    a = real_array(action, "action", "2 numbers (v [m/s], omega [rad/s])")
+    if a.shape != (2,):
+        raise ValueError(
+            f"action must have shape (2,) = (v [m/s], omega [rad/s]), got shape {a.shape}: {action!r}"
+        )
+    v, omega = float(a[0]), float(a[1])
+    if not (math.isfinite(v) and math.isfinite(omega)):
+        raise ValueError(f"action must be finite, got (v, omega) = ({v}, {omega})")
+    if not (ego.v_min <= v <= ego.v_max or ego.v_min - slack(ego.v_min) <= v <= ego.v_max + slack(ego.v_max)):
+        raise ValueError(
+            f"action v = {v} m/s lies outside [v_min, v_max] = [{ego.v_min}, {ego.v_max}]"
+            " (the env clips nothing)"
+        )
+    if not (abs(omega) <= ego.omega_max or abs(omega) <= ego.omega_max + slack(ego.omega_max)):
+        raise ValueError(
+            f"action omega = {omega} rad/s lies outside [-omega_max, omega_max] ="
+            f" [{-ego.omega_max}, {ego.omega_max}] (the env clips nothing)"
+        )
+    return v, omega
 
 
 def seeds(seed: Any, n: int) -> list[int | None]:

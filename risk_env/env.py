@@ -1,15 +1,15 @@
-"""``RiskCrossing-v0``: follow a reference path while an object crosses it; every step reports
+"""``RiskCrossing-v0``: follow a reference path while road users cross it; every step reports
 the collision risk of the paper (Tolksdorf et al., IEEE IV 2023) in ``info`` and as a cost.
 
 The env only sequences what the rest of :mod:`risk_env` defines: the unicycle
-(:mod:`risk_env.dynamics`), the path (:mod:`risk_env.path`), the object's prediction
-(:mod:`risk_env.prediction`) and the risk estimators (:mod:`risk_env.risk`). Drawing lives in
-:mod:`risk_env.rendering`, imported only when a render mode is set.
+(:mod:`risk_env.dynamics`), the path (:mod:`risk_env.path`), the objects' prediction
+(:mod:`risk_env.prediction`) and the risk estimators (:mod:`risk_env.risk`, summed over objects
+by :mod:`risk_env.total_risk`). Drawing lives in :mod:`risk_env.rendering`, imported only when a
+render mode is set.
 """
 
 from __future__ import annotations
 
-import difflib
 import inspect
 import math
 from typing import Any, SupportsFloat
@@ -19,35 +19,39 @@ import numpy as np
 from gymnasium import spaces
 
 from risk_env import checks, observation
-from risk_env.checks import ACTION_TOLERANCE, slack  # noqa: F401  (ACTION_TOLERANCE: public here too)
+from risk_env.arguments import build_scenario, slot_count
+from risk_env.checks import ACTION_TOLERANCE  # noqa: F401  (public here too)
 from risk_env.ops import MATH
 from risk_env.path import project
 from risk_env.renderers import RENDERERS, make_renderer
-from risk_env.risk import RiskEstimator, make_estimator
-from risk_env.scenario import OVERRIDES, Scenario
+from risk_env.risk import RiskEstimator
+from risk_env.scenario import Scenario
+from risk_env.total_risk import make_estimators, total
 from risk_env.transition import advance_one, observe, reward_terms
 from risk_env.variations import Variations, vary
 
 ENV_ID = "RiskCrossing-v0"
 OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
-"""How the object moves: ``"paper"`` (deterministic unicycle) or ``"sampled"`` (one draw per step
+"""How the objects move: ``"paper"`` (deterministic unicycles) or ``"sampled"`` (one draw per step
 from the prediction model)."""
-"""Who draws: highway-env's graphics, the basic pygame view, or ``"auto"`` (highway-env's if installed)."""
 
 
 class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
-    """An ego vehicle follows a reference arc while an object crosses it (paper Sec. VI-VII).
+    """An ego vehicle follows a reference arc while road users cross it (paper Sec. VI-VII).
 
     ## Description
 
     The paper's case study: the ego, a unicycle with the exact arc update, should follow a
-    constant-curvature path to its goal at the reference speed; an object (another unicycle with
-    constant inputs) crosses the path. The object's next position and speed are uncertain: the
-    prediction model (:func:`risk_env.predict`) gives truncated Gaussians around its predicted
-    mean. Each step reports the collision risk ``R = E[I_C s]`` of the step just taken, with the
-    estimator chosen at construction, in ``info["risk"]`` and ``info["cost"]`` (a constraint cost
-    for safe RL; the risk tolerance epsilon is ``scenario.risk_tolerance``). All numbers come
-    from one :class:`~risk_env.scenario.Scenario` (``env.unwrapped.scenario``).
+    constant-curvature path to its goal at the reference speed; objects (other unicycles with
+    constant inputs: the paper's one by default, several with ``scene=`` or ``objects=``) cross
+    the path. Their next positions and speeds are uncertain: the prediction model
+    (:func:`risk_env.predict`) gives truncated Gaussians around each predicted mean. Each step
+    reports the collision risk of the step just taken, ``R = sum_i R_i`` with
+    ``R_i = E[I_C,i s_i]`` of object i (by linearity of expectation exactly the step's expected
+    total harm, :mod:`risk_env.total_risk`), with the estimator chosen at construction, in
+    ``info["risk"]`` and ``info["cost"]`` (a constraint cost for safe RL; the risk tolerance
+    epsilon is ``scenario.risk_tolerance``), and each object's term in ``info["risk_terms"]``.
+    All numbers come from one :class:`~risk_env.scenario.Scenario` (``env.unwrapped.scenario``).
 
     ## Action Space
 
@@ -66,21 +70,25 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box((15,), float32)`` with finite bounds (1e5 for positions, arc length and position
-    errors, pi for headings, 1e3 for speeds and turn rates), the same for every scenario: the
-    scenario rejects what could leave them within an episode. The layout and the bounds are
-    :mod:`risk_env.observation` (``RiskCrossingEnv.observation_slices`` names its parts):
+    ``Box((10 + 6 K,), float32)``, K the number of object slots (``object_slots``, fixed at
+    construction; by default one per object of the scenario: 16 entries for the paper's scene),
+    with finite bounds (1e5 for positions, arc length and position errors, pi for headings, 1e3
+    for speeds and turn rates, [0, 1] for the flags), the same for every scenario: the scenario
+    rejects what could leave them within an episode. The layout is :mod:`risk_env.observation`
+    (read it with :func:`risk_env.observation.split`):
 
     | index | observation | unit |
     | --- | --- | --- |
     | 0, 1, 2 | ego pose c1, c2, theta (wrapped to [-pi, pi)) | m, m, rad |
     | 3, 4 | ego's last applied input v, omega | m/s, rad/s |
-    | 5, 6, 7 | object's measured pose c1, c2, theta (wrapped) | m, m, rad |
-    | 8, 9 | object's measured inputs v, omega | m/s, rad/s |
-    | 10 | lambda: arc length of the ego's closest path point (goal at 0) | m |
-    | 11..14 | path error e = (c1 - c1_P, c2 - c2_P, theta - theta_P, v - v_ref) at lambda | m, m, rad, m/s |
+    | 5 | lambda: arc length of the ego's closest path point (goal at 0) | m |
+    | 6..9 | path error e = (c1 - c1_P, c2 - c2_P, theta - theta_P, v - v_ref) at lambda | m, m, rad, m/s |
+    | 10 + 6 i | slot i's presence flag: 1.0 object i is there, 0.0 absent (the slot all zeros) | - |
+    | 11 + 6 i .. 13 + 6 i | object i's measured pose c1, c2, theta (wrapped) | m, m, rad |
+    | 14 + 6 i, 15 + 6 i | object i's measured inputs v, omega | m/s, rad/s |
 
-    The object is measured exactly; its uncertainty is that of its *future*.
+    Object i of the scenario fills slot i; slots beyond the episode's objects are absent. The
+    objects are measured exactly; their uncertainty is that of their *future*.
 
     ## Transition
 
@@ -89,14 +97,16 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     1. validate the action;
     2. the ego moves: the unicycle of :mod:`risk_env.dynamics` (the map of
        :func:`risk_env.dynamics.step`) over ``dt`` with ``(v, omega)``;
-    3. the object moves. The belief ``B = predict(scenario, measurement_k, steps=1)[1]`` is made
-       from the object's measurement *before* it moves. ``object_motion="paper"`` (default): the
-       object follows its unicycle with the scenario's constant inputs, which is exactly B's
-       mean. ``"sampled"``: its next (c1, c2, v) is one draw from B (``self.np_random``), its
-       heading advances with the mean model, and the drawn v becomes its measured speed, so the
-       reported risk is exactly the expected severity of what then happens;
-    4. risk ``R_{k+1|k}``: B evaluated by the estimator at the ego's new state
-       ``(c1, c2, theta, v)`` with v the applied speed (Monte Carlo draws from ``self.np_random``);
+    3. each object moves. Its belief ``B_i = predict(scenario, measurement_i, steps=1)[1]`` (with
+       its own uncertainty) is made from its measurement *before* it moves.
+       ``object_motion="paper"`` (default): it follows its unicycle with its constant inputs,
+       which is exactly B_i's mean. ``"sampled"``: its next (c1, c2, v) is one draw from B_i
+       (``self.np_random``: 3 uniforms per object, in order), its heading advances with the mean
+       model, and the drawn v becomes its measured speed, so the reported risk is exactly the
+       expected severity of what then happens;
+    4. risk ``R_{k+1|k} = sum_i R_i``: each B_i evaluated by its estimator (radius r_e + r_o,i,
+       its mass in the severity) at the ego's new state ``(c1, c2, theta, v)`` with v the applied
+       speed (Monte Carlo draws from ``self.np_random``, object by object);
     5. reward terms, termination, truncation, observation, info.
 
     ## Rewards
@@ -110,18 +120,19 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Starting State
 
     Deterministic: the ego at ``scenario.ego.start`` with ``scenario.ego.initial_input`` as its
-    last input (at rest by default), the object at ``scenario.object.start`` with its constant
-    inputs ``(object.speed, object.turn_rate)``. A seed only seeds ``self.np_random``.
+    last input (at rest by default), each object at its ``start`` with its constant inputs
+    ``(speed, turn_rate)``. A seed only seeds ``self.np_random``.
 
     With ``randomize=True`` each reset draws the episode's scenario from ``self.np_random``
-    (:func:`risk_env.variations.vary`: path curvature, ego start relative to the path, object
-    start and speed); ``env.unwrapped.scenario`` is then the current episode's scenario and
+    (:func:`risk_env.variations.vary`: path curvature, ego start relative to the path, each
+    object's start and speed; with ``Variations(object_count=True)`` also how many objects cross);
+    ``env.unwrapped.scenario`` is then the current episode's scenario and
     ``env.unwrapped.base_scenario`` the one given.
 
     ## Episode End
 
-    - terminated: a collision (centre distance <= r_e + r_o), or the goal is reached (the
-      closest path point has ``lambda >= lambda_g``; ``info["is_success"]`` is True when the
+    - terminated: a collision (some object's centre within r_e + r_o,i), or the goal is reached
+      (the closest path point has ``lambda >= lambda_g``; ``info["is_success"]`` is True when the
       goal is reached without a collision);
     - truncated: after ``scenario.max_steps`` steps (80 by default).
 
@@ -131,15 +142,21 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Arguments
 
     ``gym.make("RiskCrossing-v0", uncertainty="low", risk_tolerance=0.0, risk_estimator="exact",
-    object_motion="paper", reward_risk_weight=0.0, render_mode=None, renderer="auto", **overrides)``
+    object_motion="paper", reward_risk_weight=0.0, scene="paper", object_slots=None,
+    render_mode=None, renderer="auto", **overrides)``
 
     - ``uncertainty``: the paper's Table I preset, ``"low"`` (default), ``"medium"`` or ``"high"``;
     - ``risk_tolerance``: epsilon [J for the paper's severity]; ``info["risk_violation"]`` is
       ``risk > epsilon``;
     - ``risk_estimator``: ``"exact"`` (default), ``"monte_carlo"`` (J = ``mc_samples``),
-      ``"worst_case"`` or ``"grid"`` (:data:`risk_env.ESTIMATOR_NAMES`);
+      ``"worst_case"`` or ``"grid"`` (:data:`risk_env.ESTIMATOR_NAMES`), one per object;
     - ``object_motion``: ``"paper"`` or ``"sampled"`` (see Transition);
     - ``reward_risk_weight``: w >= 0 of the reward's risk term;
+    - ``scene``: which road users cross, :data:`risk_env.SCENE_NAMES` (:mod:`risk_env.scenes`):
+      ``"paper"`` (default, its one object), ``"two_crossing"`` (a second one crossing from the
+      other side), ``"four_crossing"``; the ``objects=[...]`` override gives any list instead;
+    - ``object_slots``: K, the observation's object slots (default: the scenario's number of
+      objects; fewer raises);
     - ``randomize``: draw each episode's scenario around the given one (see Starting State);
       ``variations``: the ranges, a :class:`risk_env.Variations`;
     - ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"`` (pygame; see
@@ -148,25 +165,30 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
       ``"basic"``), ``"highway"`` (highway-env's road and vehicle graphics with our overlays,
       :mod:`risk_env.highway.graphics`; needs ``pip install 'riskcrossing[render]'``) or ``"basic"``;
     - ``**overrides``: flat scenario parameters, :data:`risk_env.scenario.OVERRIDES`, e.g.
-      ``object_speed=2.5, v_ref=3.0, severity="plastic", max_steps=60``;
+      ``object_speed=2.5`` (the first object), ``objects=[{"start": (25, 32, -1.57), "speed":
+      2.5}, ...]``, ``v_ref=3.0, severity="plastic", max_steps=60``;
     - ``scenario``: a whole :class:`~risk_env.scenario.Scenario` instead of ``uncertainty``,
-      ``risk_tolerance`` and the overrides (giving both raises ``TypeError``).
+      ``risk_tolerance``, ``scene`` and the overrides (giving both raises ``TypeError``).
 
     ## Info
 
-    Returned by ``step`` (and by ``reset``, with ``risk`` 0, ``risk_violation`` False and the
-    reward terms 0):
+    Returned by ``step`` (and by ``reset``, with risks 0, ``risk_violation`` False and the reward
+    terms 0); M is the number of objects of ``base_scenario``:
 
     | key | value |
     | --- | --- |
-    | ``risk``, ``cost`` | R_{k+1|k} (float) |
+    | ``risk``, ``cost`` | R_{k+1|k} = sum_i R_i (float) |
+    | ``risk_terms`` | R_i of each object, in scenario order, ``(M,)`` float64 (0 for an absent one) |
     | ``episode_risk`` | sum of ``risk`` since ``reset`` (float): Safety-Gymnasium's per-episode cost |
     | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
-    | ``collision`` | ``distance <= r_e + r_o`` (bool) |
-    | ``distance`` | centre distance ego-object after the step [m] (float) |
+    | ``collision`` | some object within ``r_e + r_o,i`` (bool) |
+    | ``distance`` | smallest centre distance ego-object after the step [m] (float) |
+    | ``closest_object`` | index of the object at that distance (int) |
     | ``path_error`` | e at the closest path point, ``(4,)`` float64 |
     | ``lambda`` | arc length of the closest path point [m] (float) |
-    | ``ego``, ``object`` | true ``(c1, c2, theta, v)``, ``(4,)`` float64 (headings unwrapped) |
+    | ``ego``, ``object`` | true ``(c1, c2, theta, v)`` of the ego, of the first object, ``(4,)`` float64 |
+    | ``objects`` | the same of every object, ``(M, 4)`` float64 (zeros for an absent one) |
+    | ``present`` | whether each object crosses in this episode, ``(M,)`` bool |
     | ``rewards`` | the named reward terms (dict of float) |
     | ``is_success`` | goal reached without a collision (bool) |
 
@@ -178,17 +200,18 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     >>> obs, info = env.reset(seed=0)
     >>> obs, reward, terminated, truncated, info = env.step(np.array([3.0, 0.0], dtype=np.float32))
     >>> obs.shape, info["risk"] >= 0.0
-    ((15,), True)
+    ((16,), True)
+    >>> gym.make("RiskCrossing-v0", scene="two_crossing").reset(seed=0)[0].shape
+    (22,)
 
     ## Version History
 
-    - v0: initial version; ``randomize`` and the vectorised form
-      (``gym.make_vec("RiskCrossing-v0", num_envs=...)``, :mod:`risk_env.vector_env`) added.
+    - v0: initial version; ``randomize``, the vectorised form (``gym.make_vec("RiskCrossing-v0",
+      num_envs=...)``, :mod:`risk_env.vector_env`), several objects (``scene``, ``objects``,
+      ``object_slots``; the observation's object slots with presence flags) added.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 2.0}
-    observation_slices: dict[str, slice] = observation.SLICES
-    """Names of the observation's parts (:data:`risk_env.observation.SLICES`)."""
 
     def __init__(
         self,
@@ -202,12 +225,17 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         randomize: bool = False,
         variations: Variations | None = None,
         renderer: str = "auto",
+        scene: str | None = None,
+        object_slots: int | None = None,
         **overrides: Any,
     ) -> None:
-        self.base_scenario: Scenario = _build_scenario(uncertainty, risk_tolerance, scenario, overrides)
+        base = build_scenario(uncertainty, risk_tolerance, scenario, scene, overrides, _ENV_ARGUMENTS)
+        self.base_scenario: Scenario = base
         """The scenario given at construction (the episodes' own with ``randomize=False``)."""
-        self.scenario: Scenario = self.base_scenario
+        self.scenario: Scenario = base
         """The current episode's scenario; its ``risk_tolerance`` is the env's epsilon."""
+        self.object_slots: int = slot_count(object_slots, base)
+        """K: the observation's object slots."""
         if variations is not None and not isinstance(variations, Variations):
             raise TypeError(f"variations must be a risk_env.Variations, got {type(variations).__name__}")
         if variations is not None and not randomize:
@@ -221,8 +249,10 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if not (math.isfinite(weight) and weight >= 0.0):
             raise ValueError(f"reward_risk_weight must be finite and >= 0, got {reward_risk_weight!r}")
         self.reward_risk_weight = weight
-        self.estimator: RiskEstimator = make_estimator(risk_estimator, self.scenario)
-        """The risk estimator that reports ``info["risk"]``."""
+        self.estimators: tuple[RiskEstimator, ...] = make_estimators(risk_estimator, base)
+        """One risk estimator per object of ``base_scenario``: their terms sum to ``info["risk"]``."""
+        self.estimator: RiskEstimator = self.estimators[0]
+        """The first object's estimator (its ``name`` is the env's risk estimator)."""
         modes = self.metadata["render_modes"]
         if render_mode is not None and render_mode not in modes:
             raise ValueError(f"unknown render_mode {render_mode!r}; expected None or one of {modes}")
@@ -230,20 +260,23 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if renderer not in RENDERERS:
             raise ValueError(f"unknown renderer {renderer!r}; expected one of {RENDERERS}")
         self.renderer = renderer
-        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.scenario.dt}
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / base.dt}
 
-        ego = self.scenario.ego
+        ego = base.ego
         self.action_space = spaces.Box(
             low=np.array([ego.v_min, -ego.omega_max], dtype=np.float32),
             high=np.array([ego.v_max, ego.omega_max], dtype=np.float32),
             dtype=np.float32,
         )
-        high = observation.bounds()
-        self.observation_space = spaces.Box(low=-high, high=high, dtype=np.float32)
+        low, high = observation.bounds(self.object_slots)
+        self.observation_space = spaces.Box(low=low, high=high, dtype=np.float32)
 
-        self._ego_pose: tuple[float, float, float] = self.scenario.ego.start.as_tuple()  # unwrapped
+        self._ego_pose: tuple[float, float, float] = ego.start.as_tuple()  # unwrapped
         self._ego_input: tuple[float, float] = ego.initial_input
-        self._object: tuple[float, float, float, float, float] | None = None  # c1, c2, theta, v, omega
+        self._objects: list[tuple[float, ...]] | None = None  # each: c1, c2, theta, v, omega
+        self._uncertainties = base.uncertainties
+        self._radii = base.collision_distances
+        self._present: np.ndarray = np.ones(len(base.objects), dtype=bool)
         self._steps = 0
         self._ended: str | None = None  # why the episode ended, until reset
         self._plan: np.ndarray | None = None
@@ -268,10 +301,21 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._steps
 
     @property
+    def observation_slices(self) -> dict[str, slice]:
+        """Names of the observation's parts (:func:`risk_env.observation.slices`)."""
+        return observation.slices(self.object_slots)
+
+    @property
     def object_measurement(self) -> np.ndarray:
-        """The object's current measurement ``(c1, c2, theta, v, omega)``, as :func:`predict` takes it."""
+        """The first object's measurement ``(c1, c2, theta, v, omega)``, as :func:`predict` takes it."""
         self._require_reset()
-        return np.array(self._object, dtype=float)
+        return np.array(self._objects[0], dtype=float)
+
+    @property
+    def object_measurements(self) -> np.ndarray:
+        """Every present object's current measurement ``(m, 5)``, in scenario order."""
+        self._require_reset()
+        return np.array(self._objects, dtype=float)
 
     @property
     def plan(self) -> np.ndarray | None:
@@ -293,13 +337,15 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         s = self.scenario
         self._ego_pose = s.ego.start.as_tuple()
         self._ego_input = s.ego.initial_input
-        self._object = (*s.object.start.as_tuple(), float(s.object.speed), float(s.object.turn_rate))
+        self._objects = [(*o.start.as_tuple(), o.speed, o.turn_rate) for o in s.objects]
+        self._present = np.arange(len(self._radii)) < len(s.objects)
+
         self._steps = 0
         self._ended = None
         self._plan = None
         self._last_risk = 0.0
         self._episode_risk = 0.0
-        obs, info, _ = self._observe(risk=0.0, stepped=False)
+        obs, info, _ = self._observe([0.0] * len(self._objects), 0.0, stepped=False)
         if self.render_mode == "human":
             self.render()
         return obs, info
@@ -310,20 +356,29 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._ended is not None:
             raise gym.error.ResetNeeded(f"the episode has ended ({self._ended}); call env.reset() to step on")
         s = self.scenario
-        v, omega = self._check_action(action)
-        # 1.-3. the ego moves (dynamics.step's unicycle); the object moves from its one-step
-        # belief B, made from its measurement before the move; the risk R_{k+1|k} of the ego's new
-        # state against B. Python floats throughout: numpy's per-call cost would dominate.
-        uniforms = self.np_random.random(3).tolist() if self.object_motion == "sampled" else None
-        self._ego_pose, self._object, risk = advance_one(
-            s, self.estimator, self._ego_pose, (v, omega), self._object, uniforms, self.np_random
+        v, omega = checks.ego_action(action, s.ego)
+        # 1.-3. the ego moves (dynamics.step's unicycle); each object moves from its one-step
+        # belief B_i, made from its measurement before the move; the risk terms R_i of the ego's
+        # new state against each B_i. Python floats throughout: numpy's per-call cost would dominate.
+        count = len(self._objects)
+        uniforms = self.np_random.random(3 * count).tolist() if self.object_motion == "sampled" else None
+        self._ego_pose, self._objects, terms = advance_one(
+            s,
+            self.estimators,
+            self._uncertainties,
+            self._ego_pose,
+            (v, omega),
+            self._objects,
+            uniforms,
+            self.np_random,
         )
+        risk = total(terms)
         self._ego_input = (v, omega)
         self._last_risk = risk
         self._episode_risk += risk
         self._steps += 1
         # 4. reward terms, episode end, observation, info
-        obs, info, goal = self._observe(risk, stepped=True)
+        obs, info, goal = self._observe(terms, risk, stepped=True)
         reward = info["rewards"]["path_error"] + info["rewards"]["risk"]
         terminated = info["collision"] or goal
         truncated = self._steps >= s.max_steps
@@ -352,7 +407,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._renderer.render(
             ego_pose=np.array(self._ego_pose),
             ego_speed=self._ego_input[0],
-            object_measurement=np.array(self._object, dtype=float),
+            object_measurements=self.object_measurements,
             plan=self._plan,
             status=(
                 f"k = {self._steps}  t = {self._steps * self.scenario.dt:.1f} s",
@@ -385,97 +440,48 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     # ---------------------------------------------------------------- internals
     def _require_reset(self) -> None:
-        if self._object is None:
+        if self._objects is None:
             raise gym.error.ResetNeeded("call env.reset() before env.step() or env.render()")
 
-    def _check_action(self, action: Any) -> tuple[float, float]:
-        """The action as ``(v, omega)`` floats; raises ``ValueError`` on anything the Box rejects."""
-        a = checks.real_array(action, "action", "2 numbers (v [m/s], omega [rad/s])")
-        if a.shape != (2,):
-            raise ValueError(
-                f"action must have shape (2,) = (v [m/s], omega [rad/s]), got shape {a.shape}: {action!r}"
-            )
-        v, omega = float(a[0]), float(a[1])
-        if not (math.isfinite(v) and math.isfinite(omega)):
-            raise ValueError(f"action must be finite, got (v, omega) = ({v}, {omega})")
-        ego = self.scenario.ego
-        if not (
-            ego.v_min <= v <= ego.v_max or ego.v_min - slack(ego.v_min) <= v <= ego.v_max + slack(ego.v_max)
-        ):
-            raise ValueError(
-                f"action v = {v} m/s lies outside [v_min, v_max] = [{ego.v_min}, {ego.v_max}]"
-                " (the env clips nothing)"
-            )
-        if not (abs(omega) <= ego.omega_max or abs(omega) <= ego.omega_max + slack(ego.omega_max)):
-            raise ValueError(
-                f"action omega = {omega} rad/s lies outside [-omega_max, omega_max] ="
-                f" [{-ego.omega_max}, {ego.omega_max}] (the env clips nothing)"
-            )
-        return v, omega
-
-    def _observe(self, risk: float, stepped: bool) -> tuple[np.ndarray, dict[str, Any], bool]:
+    def _observe(
+        self, terms: list[float], risk: float, stepped: bool
+    ) -> tuple[np.ndarray, dict[str, Any], bool]:
         """Observation, info and whether the goal is reached; the reward terms are 0 at reset."""
         s = self.scenario
-        pose, obj = self._ego_pose, self._object
-        seen = observe(s.path, s.ego.v_ref, s.collision_distance, pose, self._ego_input, obj, MATH)
+        pose, objects = self._ego_pose, self._objects
+        seen = observe(
+            s.path, s.ego.v_ref, self._radii, pose, self._ego_input, objects, self.object_slots, None, MATH
+        )
         if stepped:
             rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
         else:
             rewards = {"path_error": 0.0, "risk": 0.0}
+        if len(objects) == len(self._radii):
+            states = np.array(objects)[:, :4]
+        else:  # objects of the base scenario not in this episode: zeros
+            states = np.zeros((len(self._radii), 4))
+            states[: len(objects)] = [o[:4] for o in objects]
+            terms = [*terms, *[0.0] * (len(self._radii) - len(objects))]
         collision, goal = seen.collision, seen.goal
         info = {
             "risk": risk,
             "cost": risk,
+            "risk_terms": np.array(terms),
             "episode_risk": self._episode_risk,
             "risk_violation": risk > s.risk_tolerance,
             "collision": collision,
             "distance": seen.distance,
+            "closest_object": seen.closest,
             "path_error": seen.path_error,
             "lambda": seen.lam,
             "ego": np.array((pose[0], pose[1], pose[2], self._ego_input[0])),
-            "object": np.array(obj[:4]),
+            "object": states[0].copy(),
+            "objects": states,
+            "present": self._present.copy(),
             "rewards": rewards,
             "is_success": goal and not collision,
         }
         return seen.obs, info, goal
-
-
-def _build_scenario(
-    uncertainty: str | None,
-    risk_tolerance: float | None,
-    scenario: Scenario | None,
-    overrides: dict[str, Any],
-) -> Scenario:
-    """The env's scenario from either ``scenario`` or a preset with overrides; clear errors."""
-    unknown = [name for name in overrides if name not in OVERRIDES]
-    if unknown:
-        known = [*OVERRIDES, *_ENV_ARGUMENTS]
-        hints = []
-        for name in unknown:
-            close = difflib.get_close_matches(name, known, n=3)
-            hints.append(f"{name!r}" + (f" (did you mean {', '.join(close)}?)" if close else ""))
-        raise TypeError(
-            f"RiskCrossingEnv got unknown keyword argument(s) {', '.join(hints)}. Env arguments:"
-            f" {sorted(_ENV_ARGUMENTS)}; scenario parameters: {sorted(OVERRIDES)}"
-        )
-    if scenario is not None:
-        if not isinstance(scenario, Scenario):
-            raise TypeError(f"scenario must be a risk_env.Scenario, got {type(scenario).__name__}")
-        given = [
-            name
-            for name, value in (("uncertainty", uncertainty), ("risk_tolerance", risk_tolerance))
-            if value is not None
-        ]
-        given += sorted(overrides)
-        if given:
-            raise TypeError(
-                f"pass either scenario= or uncertainty/risk_tolerance/scenario parameters, not both;"
-                f" got scenario= and {given}. Use scenario.replace(...) to change a scenario."
-            )
-        return scenario
-    if risk_tolerance is not None:
-        overrides = {**overrides, "risk_tolerance": risk_tolerance}
-    return Scenario.preset("low" if uncertainty is None else uncertainty, **overrides)
 
 
 _ENV_ARGUMENTS: tuple[str, ...] = tuple(

@@ -120,13 +120,15 @@ def predict(
     return out
 
 
-def predict_step(scenario: Scenario, measurement: Any, step: int = 1, ops: Ops = NUMPY) -> Belief:
-    """``predict(scenario, measurement, step, ops)[step]`` alone: the belief at one prediction step
-    (the env's B at ``step=1``), without building the others."""
+def predict_step(
+    scenario: Scenario, measurement: Any, step: int = 1, ops: Ops = NUMPY, uncertainty: Any = None
+) -> Belief:
+    """``predict(scenario, measurement, step, ops, uncertainty)[step]`` alone: the belief at one
+    prediction step (the env's B at ``step=1``), without building the others."""
     x, y, th, v, w = measurement
     for _ in range(step):
         x, y, th = unicycle_step(x, y, th, v, w, scenario.dt, ops)
-    return _belief(scenario.uncertainty, step, x, y, th, v)
+    return _belief(scenario.uncertainty if uncertainty is None else uncertainty, step, x, y, th, v)
 
 
 def _belief(u: Any, n: int, x: Any, y: Any, th: Any, v: Any) -> Belief:
@@ -156,7 +158,9 @@ def _spreads(u: Uncertainty, n: int) -> dict[str, float]:
     return _spread_formulas(u, n)
 
 
-def predict_array(scenario: Scenario, measurement: np.ndarray, steps: int | None = None) -> Belief:
+def predict_array(
+    scenario: Scenario, measurement: np.ndarray, steps: int | None = None, uncertainty: Any = None
+) -> Belief:
     """numpy convenience: one :class:`Belief` whose fields have a leading step axis ``(steps+1, ...)``."""
-    beliefs = predict(scenario, np.asarray(measurement, float).T, steps)
+    beliefs = predict(scenario, np.asarray(measurement, float).T, steps, uncertainty=uncertainty)
     return Belief.from_array(np.stack([b.as_array() for b in beliefs]))

@@ -1,10 +1,11 @@
 """The basic top view of ``RiskCrossing-v0`` with pygame (pygame-ce). The env chooses between it and
 highway-env's graphics (:mod:`risk_env.highway.graphics`) in :mod:`risk_env.renderers`.
 
-Drawn: the reference path (solid up to the goal, thin beyond it), the goal, the object's
+Drawn: the reference path (solid up to the goal, thin beyond it), the goal, each object's
 predicted truncation boxes and means over the horizon (:func:`risk_env.predict` from its current
-measurement), the ego and object discs with their headings, an optional planned ego trajectory
-and a status text. The view is fixed: it fits the path and both start positions.
+measurement, with its own uncertainty), the ego and object discs with their headings, an optional
+planned ego trajectory and a status text. The view is fixed: it fits the path and every start
+position.
 
 ``"rgb_array"`` needs no display (the SDL video driver defaults to ``dummy``); ``"human"`` opens a
 window and needs a display.
@@ -76,8 +77,8 @@ class Renderer:
         s = self.scenario
         lam = np.linspace(s.path.lambda_start, s.path.lambda_goal, 60)
         px, py, _ = point(s.path, lam)
-        xs = np.concatenate([px, [s.ego.start.x, s.object.start.x]])
-        ys = np.concatenate([py, [s.ego.start.y, s.object.start.y]])
+        xs = np.concatenate([px, [s.ego.start.x], [o.start.x for o in s.objects]])
+        ys = np.concatenate([py, [s.ego.start.y], [o.start.y for o in s.objects]])
         lo = np.array([xs.min(), ys.min()]) - MARGIN
         hi = np.array([xs.max(), ys.max()]) + MARGIN
         width, height = self.size
@@ -95,13 +96,15 @@ class Renderer:
         self,
         ego_pose: np.ndarray,
         ego_speed: float,
-        object_measurement: np.ndarray,
+        object_measurements: np.ndarray,
         plan: np.ndarray | None = None,
         status: Sequence[str] = (),
     ) -> np.ndarray | None:
-        """Draw one frame: ``ego_pose (3,)``, ``object_measurement (5,)`` = (c1, c2, theta, v,
-        omega), ``plan (M, 2)`` [m] or None. Returns ``(H, W, 3)`` uint8 in ``"rgb_array"`` mode."""
+        """Draw one frame: ``ego_pose (3,)``, ``object_measurements (m, 5)`` = (c1, c2, theta, v,
+        omega) of the scenario's first m objects (a single ``(5,)`` is the first), ``plan (M, 2)``
+        [m] or None. Returns ``(H, W, 3)`` uint8 in ``"rgb_array"`` mode."""
         s = self.scenario
+        measurements = np.atleast_2d(np.asarray(object_measurements, dtype=float))
         surf = self._surface
         surf.fill(BACKGROUND)
         pygame.draw.lines(surf, PATH, False, self._beyond_px.tolist(), 1)
@@ -109,15 +112,16 @@ class Renderer:
         goal = self._to_px(s.path.goal.x, s.path.goal.y)
         pygame.draw.circle(surf, GOAL, goal.tolist(), 5)
 
-        # The object's predicted truncation boxes and means, n = 1..N (near: dark).
-        beliefs = predict(s, object_measurement)[1:]
-        for n, b in reversed(list(enumerate(beliefs, start=1))):
-            colour = blend(BOX_NEAR, BOX_FAR, (n - 1) / max(len(beliefs) - 1, 1))
-            corner = self._to_px(float(b.x) - float(b.half_x), float(b.y) + float(b.half_y))
-            size = (2 * float(b.half_x) * self._scale, 2 * float(b.half_y) * self._scale)
-            rect = pygame.Rect(*corner.tolist(), max(size[0], 1.0), max(size[1], 1.0))
-            pygame.draw.rect(surf, colour, rect, 2)
-            pygame.draw.circle(surf, colour, self._to_px(float(b.x), float(b.y)).tolist(), 3)
+        # Each object's predicted truncation boxes and means, n = 1..N (near: dark).
+        for measurement, u in zip(measurements, s.uncertainties, strict=False):
+            beliefs = predict(s, measurement, uncertainty=u)[1:]
+            for n, b in reversed(list(enumerate(beliefs, start=1))):
+                colour = blend(BOX_NEAR, BOX_FAR, (n - 1) / max(len(beliefs) - 1, 1))
+                corner = self._to_px(float(b.x) - float(b.half_x), float(b.y) + float(b.half_y))
+                size = (2 * float(b.half_x) * self._scale, 2 * float(b.half_y) * self._scale)
+                rect = pygame.Rect(*corner.tolist(), max(size[0], 1.0), max(size[1], 1.0))
+                pygame.draw.rect(surf, colour, rect, 2)
+                pygame.draw.circle(surf, colour, self._to_px(float(b.x), float(b.y)).tolist(), 3)
 
         if plan is not None and len(plan) > 0:
             pts = self._to_px(plan[:, 0], plan[:, 1]).tolist()
@@ -126,8 +130,8 @@ class Renderer:
             for p in pts:
                 pygame.draw.circle(surf, PLAN, p, 3)
 
-        x, y, th, *_ = object_measurement
-        self._disc(x, y, th, s.object.radius, OBJECT)
+        for (x, y, th, *_), obj in zip(measurements, s.objects, strict=False):
+            self._disc(x, y, th, obj.radius, OBJECT)
         self._disc(ego_pose[0], ego_pose[1], ego_pose[2], s.ego.radius, EGO)
         for i, line in enumerate(status):
             surf.blit(self._font.render(line, True, TEXT), (8, 6 + 18 * i))

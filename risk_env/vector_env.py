@@ -13,6 +13,7 @@ the modes to the same numbers to 1e-12 (risks: 1e-12 in probability).
 from __future__ import annotations
 
 import dataclasses
+from itertools import chain
 from typing import Any
 
 import gymnasium as gym
@@ -20,18 +21,19 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from risk_env import checks, dynamics, observation
+from risk_env import checks, dynamics
 from risk_env.checks import slack
 from risk_env.env import RiskCrossingEnv
 from risk_env.ops import MATH, NUMPY
 from risk_env.path import PathBatch
-from risk_env.pcg64 import GeneratorBatch
+from risk_env.pcg64 import MAX_DRAWS, GeneratorBatch
 from risk_env.prediction import Belief, predict_step
 from risk_env.risk import MonteCarloRisk
 from risk_env.scenario import Scenario
+from risk_env.total_risk import total
 from risk_env.transition import Observed, advance_one, move_object, observe, reward_terms
-from risk_env.variations import DRAWS, draw
-from risk_env.vector_infos import masked, parse_autoreset_mode, where
+from risk_env.variations import draw, draw_count
+from risk_env.vector_infos import infos, masked, parse_autoreset_mode, where
 
 
 class RiskCrossingVectorEnv(VectorEnv):
@@ -39,14 +41,17 @@ class RiskCrossingVectorEnv(VectorEnv):
 
     Takes the single env's keyword arguments (validated by building one) plus ``num_envs`` and
     ``autoreset_mode`` (Gymnasium's ``AutoresetMode``, next-step by default; ``"same_step"``
-    suits stable-baselines3). Observations ``(B, 15)`` float32, actions ``(B, 2)`` in physical
-    units, infos as Gymnasium's vector envs give them: every key of the single env's info as an
-    array over copies, with its ``_key`` mask (one shared read-only all-True array). Draws
-    nothing (``render_mode`` must be None).
+    suits stable-baselines3). Observations ``(B, 10 + 6 K)`` float32, actions ``(B, 2)`` in
+    physical units, infos as Gymnasium's vector envs give them: every key of the single env's info
+    as an array over copies (``risk_terms`` ``(B, M)``, ``objects`` ``(B, M, 4)``), with its
+    ``_key`` mask (one shared read-only all-True array). Draws nothing (``render_mode`` must be
+    None).
 
-    The state lives in one array ``(10, B)`` whose rows are the observation's first ten entries
-    (headings unwrapped); a step computes every copy and keeps the result by mask where a copy
-    was just reset (next-step autoreset), so its fixed cost is a few dozen numpy calls.
+    The state lives in one array ``(5 + 5 M, B)``: the ego's pose and last input, then each of the
+    M objects' measurement (headings unwrapped); with ``Variations(object_count=True)`` a mask
+    ``(M, B)`` says which objects cross in each copy's episode. A step computes every copy and
+    keeps the result by mask where a copy was just reset (next-step autoreset), so its fixed cost
+    is a few dozen numpy calls per object.
     """
 
     def __init__(
@@ -66,7 +71,8 @@ class RiskCrossingVectorEnv(VectorEnv):
         template = RiskCrossingEnv(**kwargs)  # the single env validates every argument
         self.template = template
         self.base_scenario: Scenario = template.base_scenario
-        self.estimator = template.estimator
+        self.estimators = template.estimators
+        self.object_slots = template.object_slots
         self.object_motion = template.object_motion
         self.reward_risk_weight = template.reward_risk_weight
         self.randomize, self.variations = template.randomize, template.variations
@@ -81,12 +87,18 @@ class RiskCrossingVectorEnv(VectorEnv):
         n, s = num_envs, self.base_scenario
         self._generators = GeneratorBatch(n)
         self._path = PathBatch(np.full(n, s.path.curvature), s.path.goal)  # vary keeps the goal
-        self._state = np.zeros((_STATE, n))  # observation rows 0..9, headings unwrapped
-        self._spare = np.zeros((_STATE, n))
+        self._objects = len(s.objects)
+        rows = 5 + 5 * self._objects
+        self._state = np.zeros((rows, n))  # ego pose, input; each object's measurement (unwrapped)
+        self._spare = np.zeros((rows, n))
         self._start = np.array(
-            (*s.ego.start.as_tuple(), *s.ego.initial_input, *s.object.start.as_tuple())
-            + (s.object.speed, s.object.turn_rate)
+            [*s.ego.start.as_tuple(), *s.ego.initial_input]
+            + [x for o in s.objects for x in (*o.start.as_tuple(), o.speed, o.turn_rate)]
         )
+        self._uncertainties, self._radii = s.uncertainties, s.collision_distances
+        counted = self.randomize and self.variations.object_count
+        self._present = np.ones((self._objects, n), dtype=bool) if counted else None
+        """Which objects cross in each copy's episode ``(M, B)``; None: all, always."""
         self._steps = np.zeros(n, dtype=np.int64)
         self._episode_risk = np.zeros(n)  # sum of the risk since each copy's reset
         self._autoreset = np.zeros(n, dtype=bool)
@@ -99,6 +111,11 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._mask.setflags(write=False)
         self._never = np.zeros(n, dtype=bool)
         self._never.setflags(write=False)
+        self._no_terms = np.zeros((len(s.objects), n))
+        self._no_terms.setflags(write=False)
+        self._all_present = np.ones((n, len(s.objects)), dtype=bool)
+        self._all_present.setflags(write=False)
+        self._all_counts = [len(s.objects)] * n
         self.scalar_copies = SCALAR_COPIES
         """Batches of up to this many copies step one by one in Python floats (0: always numpy)."""
 
@@ -133,7 +150,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._started = True
         self._autoreset[mask] = False
         seen = self._observe()
-        return seen.obs, self._infos(seen, np.zeros(n), self._never)
+        return seen.obs, self._infos(seen, self._no_terms, self._never, self._no_terms[0])
 
     def step(
         self, actions: np.ndarray
@@ -157,14 +174,15 @@ class RiskCrossingVectorEnv(VectorEnv):
         if active is not None:  # the reset copies are computed too, on a harmless input, and kept
             a[~active] = 0.0
         if n <= self.scalar_copies:
-            risk = self._advance_one_by_one(a, active)
+            terms = self._advance_one_by_one(a, active)
         else:
-            risk = self._advance(a, active)
+            terms = self._advance(a, active)
+        risk = total(terms)  # R = sum_i R_i (risk_env.total_risk)
         self._episode_risk += risk  # 0 where a copy did not step
         # 4. reward terms, episode end, observation, info
         seen = self._observe()
         stepped = self._mask if active is None else active
-        infos = self._infos(seen, risk, stepped)
+        infos = self._infos(seen, terms, stepped, risk)
         rewards = infos["rewards"]["path_error"] + infos["rewards"]["risk"]  # 0 where not stepped
         terminated = seen.collision | seen.goal
         truncated = self._steps >= s.max_steps
@@ -183,7 +201,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             self._reset_copies(done)
             reset_seen = self._observe()
             obs = reset_seen.obs
-            fresh = self._infos(reset_seen, np.zeros(n), self._never)
+            fresh = self._infos(reset_seen, self._no_terms, self._never, self._no_terms[0])
             infos.update({k: where(done, fresh[k], infos[k]) for k in fresh if not k.startswith("_")})
         else:
             self._autoreset = done
@@ -191,47 +209,80 @@ class RiskCrossingVectorEnv(VectorEnv):
 
     def _advance(self, a: np.ndarray, active: np.ndarray | None) -> np.ndarray:
         """Steps 1-3 of the transition for every copy at once (numpy); the new state replaces
-        the old where a copy steps. Returns R ``(B,)``, 0 where a copy did not step."""
+        the old where a copy steps. Returns the terms R_i ``(M, B)``, 0 where a copy did not step
+        or object i is absent."""
         s, state = self.base_scenario, self._state
         v, omega = a[:, 0], a[:, 1]
         # 1. the ego moves
         new = self._spare  # the state after the step, written over the one before last
         new[0], new[1], new[2] = dynamics.unicycle_step(state[0], state[1], state[2], v, omega, s.dt, NUMPY)
         new[3], new[4] = v, omega
-        # 2. the object moves; B = its one-step belief from the measurement before the move
-        measurement = (state[5], state[6], state[7], state[8], state[9])
-        belief = predict_step(s, measurement, 1, NUMPY)
-        uniforms = self._generators.random(3, active) if self.object_motion == "sampled" else None
-        new[5], new[6], new[7], new[8], new[9] = move_object(belief, measurement, uniforms, NUMPY)
-        # 3. the risk R_{k+1|k} of the ego's new state against B
-        risk = self._risk(new[0:4].T, belief, active)
+        # 2. each object moves; B_i = its one-step belief from the measurement before the move
+        beliefs = []
+        for i in range(self._objects):
+            rows = slice(5 + 5 * i, 10 + 5 * i)
+            measurement = tuple(state[rows])
+            belief = predict_step(s, measurement, 1, NUMPY, self._uncertainties[i])
+            uniforms = None
+            if self.object_motion == "sampled":
+                uniforms = self._generators.random(3, self._drawing(i, active))
+            new[rows] = move_object(belief, measurement, uniforms, NUMPY)
+            beliefs.append(belief)
+        # 3. the terms R_i of the ego's new state against each B_i
+        terms = self._risk(new[0:4].T, beliefs, active)
         if active is None:
             self._state, self._spare = new, state
             self._steps += 1
         else:
             np.copyto(state, new, where=active)
             self._steps += active
-        return risk
+        return terms
+
+    def _drawing(self, i: int, active: np.ndarray | None) -> np.ndarray | None:
+        """The copies that step with object i present (None: all)."""
+        if self._present is None:
+            return active
+        return self._present[i] if active is None else active & self._present[i]
 
     def _advance_one_by_one(self, a: np.ndarray, active: np.ndarray | None) -> np.ndarray:
         """:meth:`_advance` for a few copies: each in Python floats by the single env's own
         :func:`~risk_env.transition.advance_one`, cheaper than numpy's per-call cost."""
         s, rows, generators = self.base_scenario, self._state.T.tolist(), self._generators
-        draws = generators.random(3, active).tolist() if self.object_motion == "sampled" else None
-        risk = [0.0] * self.num_envs
-        for i, (v, omega) in enumerate(a.tolist()):
-            if active is not None and not active[i]:
+        counts, count = self._counts(), self._objects
+        draws = None
+        if self.object_motion == "sampled":  # each copy's 3 uniforms per present object, in order
+            if count == 1 and self._present is None:
+                per_object = [generators.random(3, active).tolist()]
+            else:
+                per_object = [generators.random(3, self._drawing(i, active)).tolist() for i in range(count)]
+            draws = per_object[0]
+            if count > 1:
+                draws = [
+                    [u for i in range(counts[j]) for u in per_object[i][j]] for j in range(self.num_envs)
+                ]
+        terms = [[0.0] * self.num_envs for _ in range(count)]
+        for j, (v, omega) in enumerate(a.tolist()):
+            if active is not None and not active[j]:
                 continue
-            row, rng = rows[i], generators.borrow(i)  # Monte Carlo draws from it
-            uniforms = None if draws is None else draws[i]
-            pose, moved, risk[i] = advance_one(
-                s, self.estimator, row[0:3], (v, omega), row[5:10], uniforms, rng
+            row, rng, m = rows[j], generators.borrow(j), counts[j]  # Monte Carlo draws from rng
+            objects = [row[5:10]] if m == 1 else [row[5 + 5 * i : 10 + 5 * i] for i in range(m)]
+            uniforms = None if draws is None else draws[j]
+            pose, moved, risks = advance_one(
+                s, self.estimators, self._uncertainties, row[0:3], (v, omega), objects, uniforms, rng
             )
-            generators.give_back(i)
-            rows[i] = [*pose, v, omega, *moved]
-            self._steps[i] += 1
+            generators.give_back(j)
+            row[: 5 + 5 * m] = [*pose, v, omega, *chain.from_iterable(moved)]
+            for i, risk in enumerate(risks):
+                terms[i][j] = risk
+            self._steps[j] += 1
         self._state[:] = np.array(rows).T
-        return np.array(risk)
+        return np.array(terms)
+
+    def _counts(self) -> list[int]:
+        """How many objects (the first ones) cross in each copy's episode."""
+        if self._present is None:
+            return self._all_counts
+        return self._present.sum(axis=0).tolist()
 
     def close_extras(self, **kwargs: Any) -> None:
         self.template.close()
@@ -245,21 +296,36 @@ class RiskCrossingVectorEnv(VectorEnv):
             self._episode_risk[mask] = 0.0
             return
         index = np.flatnonzero(mask)
-        # each copy's own generator, DRAWS uniforms on [-1, 1) as vary takes them (bit for bit)
-        u = self._generators.random_at(DRAWS, index) * 2.0 - 1.0
+        base = self.base_scenario
+        # each copy's own generator, the uniforms on [-1, 1) as vary takes them (bit for bit)
+        count = draw_count(base, self.variations)
+        u = np.concatenate(
+            [
+                self._generators.random_at(min(MAX_DRAWS, count - k), index)
+                for k in range(0, count, MAX_DRAWS)
+            ],
+            axis=1,
+        )
+        u = u * 2.0 - 1.0
         if len(index) <= self.scalar_copies:  # a few copies: each in Python floats
-            starts = [draw(self.base_scenario, row, self.variations, MATH) for row in u.tolist()]
-            curvature, ego, obj, speed = (np.array(field) for field in zip(*starts, strict=True))
-            ego, obj = ego.T, obj.T
+            starts = [draw(base, row, self.variations, MATH) for row in u.tolist()]
+            curvature = np.array([start.curvature for start in starts])
+            ego = np.array([start.ego for start in starts]).T
+            objects = np.array([start.objects for start in starts]).transpose(1, 2, 0)  # (M, 4, n)
+            counts = None if self._present is None else np.array([start.count for start in starts])
         else:
-            curvature, ego, obj, speed = draw(self.base_scenario, u.T, self.variations, NUMPY)
+            start = draw(base, u.T, self.variations, NUMPY)
+            curvature, ego, counts = start.curvature, np.array(start.ego), start.count
+            objects = np.array([np.broadcast_arrays(*o) for o in start.objects])  # (M, 4, n)
         self._path.curvature[index] = curvature
         state = self._state
         state[0:3, index] = ego
         state[3:5, index] = self._start[3:5, None]
-        state[5:8, index] = obj
-        state[8, index] = speed
-        state[9, index] = self._start[9]
+        for i in range(self._objects):
+            state[5 + 5 * i : 9 + 5 * i, index] = objects[i]
+            state[9 + 5 * i, index] = self._start[9 + 5 * i]
+        if counts is not None:
+            self._present[:, index] = np.arange(self._objects)[:, None] < counts[None, :]
         self._steps[index] = 0
         self._episode_risk[index] = 0.0
 
@@ -295,78 +361,73 @@ class RiskCrossingVectorEnv(VectorEnv):
                     " the env clips nothing)"
                 )
 
-    def _risk(self, ego_state: np.ndarray, belief: Belief, active: np.ndarray | None) -> np.ndarray:
-        """R of ``ego_state (B, 4)`` against the beliefs ``(B,)``, 0 where a copy did not step;
-        Monte Carlo draws from each stepping copy's own generator, as the single env does."""
-        if not isinstance(self.estimator, MonteCarloRisk):
-            risk = np.broadcast_to(self.estimator.risk(ego_state, belief), (self.num_envs,))
-            return risk.copy() if active is None else np.where(active, risk, 0.0)
-        risk = np.zeros(self.num_envs)
-        copies = range(self.num_envs) if active is None else np.flatnonzero(active).tolist()
-        for i in copies:
-            one = dataclasses.replace(
-                belief, x=belief.x[i], y=belief.y[i], theta=belief.theta[i], speed=belief.speed[i]
-            )
-            risk[i] = self.estimator.risk(ego_state[i], one, rng=self._generators.borrow(i))
-            self._generators.give_back(i)
-        return risk
+    def _risk(self, ego_state: np.ndarray, beliefs: list[Belief], active: np.ndarray | None) -> np.ndarray:
+        """The terms R_i ``(M, B)`` of ``ego_state (B, 4)`` against the beliefs ``(B,)`` of each
+        object, 0 where a copy did not step or the object is absent; Monte Carlo draws from each
+        stepping copy's own generator, object by object, as the single env does."""
+        terms = np.zeros((self._objects, self.num_envs))
+        for i, (estimator, belief) in enumerate(zip(self.estimators, beliefs, strict=True)):
+            drawing = self._drawing(i, active)
+            if not isinstance(estimator, MonteCarloRisk):
+                risk = estimator.risk(ego_state, belief)
+                terms[i] = risk if drawing is None else np.where(drawing, risk, 0.0)
+                continue
+            copies = range(self.num_envs) if drawing is None else np.flatnonzero(drawing).tolist()
+            for j in copies:
+                one = dataclasses.replace(
+                    belief, x=belief.x[j], y=belief.y[j], theta=belief.theta[j], speed=belief.speed[j]
+                )
+                terms[i, j] = estimator.risk(ego_state[j], one, rng=self._generators.borrow(j))
+                self._generators.give_back(j)
+        return terms
 
     def _observe(self) -> Observed:
-        s, state = self.base_scenario, self._state
+        s, state, slots = self.base_scenario, self._state, self.object_slots
+        v_ref, radii = s.ego.v_ref, self._radii
         if self.num_envs <= self.scalar_copies:  # each copy in Python floats, then stacked
-            goal, rows = s.path.goal, state.T.tolist()
+            goal, rows, counts = s.path.goal, state.T.tolist(), self._counts()
             seen = [
-                observe(PathBatch(k, goal), s.ego.v_ref, s.collision_distance, r[0:3], r[3:5], r[5:10], MATH)
-                for k, r in zip(self._path.curvature.tolist(), rows, strict=True)
+                observe(
+                    PathBatch(k, goal),
+                    v_ref,
+                    radii,
+                    r[0:3],
+                    r[3:5],
+                    [r[5:10]] if m == 1 else [r[5 + 5 * i : 10 + 5 * i] for i in range(m)],
+                    slots,
+                    None,
+                    MATH,
+                )
+                for k, r, m in zip(self._path.curvature.tolist(), rows, counts, strict=True)
             ]
             return Observed(*(np.array(field) for field in zip(*seen, strict=True)))
-        return observe(
-            self._path,
-            s.ego.v_ref,
-            s.collision_distance,
-            (state[0], state[1], state[2]),
-            (state[3], state[4]),
-            (state[5], state[6], state[7], state[8], state[9]),
-            NUMPY,
-        )
+        objects = [tuple(state[5 + 5 * i : 10 + 5 * i]) for i in range(self._objects)]
+        present = None if self._present is None else list(self._present)
+        ego = (state[0], state[1], state[2])
+        return observe(self._path, v_ref, radii, ego, (state[3], state[4]), objects, slots, present, NUMPY)
 
-    def _infos(self, seen: Observed, risk: np.ndarray, stepped: np.ndarray) -> dict[str, Any]:
-        """The single env's info keys as arrays over copies, each with the all-True ``_key`` mask."""
-        terms = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
+    def _infos(
+        self, seen: Observed, terms: np.ndarray, stepped: np.ndarray, risk: np.ndarray
+    ) -> dict[str, Any]:
+        """The single env's info keys as arrays over copies (:func:`risk_env.vector_infos.infos`),
+        from the terms R_i ``(M, B)`` and their sum ``risk``."""
+        rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
         if stepped is not self._mask:
-            terms = {k: np.where(stepped, v, 0.0) for k, v in terms.items()}
-        state, mask = self._state, self._mask
-        return {
-            "risk": risk,
-            "_risk": mask,
-            "cost": risk.copy(),
-            "_cost": mask,
-            "episode_risk": self._episode_risk.copy(),
-            "_episode_risk": mask,
-            "risk_violation": risk > self.base_scenario.risk_tolerance,
-            "_risk_violation": mask,
-            "collision": seen.collision,
-            "_collision": mask,
-            "distance": seen.distance,
-            "_distance": mask,
-            "path_error": seen.path_error,
-            "_path_error": mask,
-            "lambda": seen.lam,
-            "_lambda": mask,
-            "ego": state[0:4].T.copy(),
-            "_ego": mask,
-            "object": state[5:9].T.copy(),
-            "_object": mask,
-            "is_success": seen.goal & ~seen.collision,
-            "_is_success": mask,
-            "rewards": {**terms, **{f"_{k}": mask for k in terms}},
-            "_rewards": mask,
-        }
+            rewards = {k: np.where(stepped, v, 0.0) for k, v in rewards.items()}
+        return infos(
+            seen,
+            risk,
+            terms,
+            self._episode_risk,
+            self._state,
+            self._all_present if self._present is None else self._present.T.copy(),
+            rewards,
+            self.base_scenario.risk_tolerance,
+            self._mask,
+        )
 
 
 SCALAR_COPIES = 7
 """Up to this many copies, a batch step runs each copy through the single env's float code (~25 us
 a copy): numpy's fixed cost (some 250 calls of ~0.7 us on tiny arrays) exceeds a few copies' cost.
 Measured crossover: about 8 copies."""
-_STATE = observation.PROGRESS
-"""Rows of the batched state: the observation's entries before lambda."""

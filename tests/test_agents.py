@@ -282,7 +282,7 @@ def test_a_feasible_hard_problem_whose_calls_fail_is_solved_through_its_exact_pe
     """The hard problem is feasible but its calls fail: the soft plan has zero slacks, so it is the
     hard problem's solution (the penalty is exact): level (a), never "soft"."""
     scenario = Scenario.preset("medium", risk_tolerance=0.0)
-    agent = SMPC(scenario)
+    agent = SMPC(scenario, max_solve_time=math.inf)  # the degradation's logic, not the time cap
     obs = start_observation(scenario)
     reference = SMPC(scenario)
     reference.predict(obs)
@@ -626,7 +626,7 @@ def test_episode_start_of_the_wrong_size_raises():
     from agents import RMPC
 
     agent = RMPC(Scenario.preset("low"))
-    obs = np.zeros((2, 15), dtype=np.float32)
+    obs = np.zeros((2, ob.SIZE), dtype=np.float32)
     with pytest.raises(ValueError, match="episode_start must have 1 or 2 entries"):
         agent.predict(obs, episode_start=np.array([True, False, True]))
 

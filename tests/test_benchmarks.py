@@ -2,6 +2,7 @@
 
 import csv
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -141,6 +142,67 @@ def test_full_table2_reproduces_the_papers_trends(tmp_path):
     assert verdicts["RMPC (worst_case) d_min grows with uncertainty"]
 
 
+COMMITTED = Path(__file__).resolve().parents[1] / "docs" / "results" / "table2.csv"
+"""The committed Table II (one object, the paper's scene): every run must come out as it did."""
+SAME_CELLS = (
+    "e_acc",
+    "d_min",
+    "collided",
+    "reached_goal",
+    "steps",
+    "failed_solves",
+    "paper_e_acc",
+    "paper_d_min",
+)
+
+
+def _committed() -> dict[tuple[str, str, str, float], dict[str, str]]:
+    with COMMITTED.open() as f:
+        return {
+            (r["method"], r["risk_method"], r["uncertainty"], float(r["epsilon"])): r
+            for r in csv.DictReader(f)
+        }
+
+
+def _assert_as_committed(row: dict, committed: dict[str, str]) -> None:
+    """Cell by cell: the same numbers as written (CSV text), the largest risk to its 4 digits."""
+    for column in SAME_CELLS:
+        assert str(row[column]) == committed[column], (column, row[column], committed[column])
+    assert row["max_risk"] == float(f"{float(committed['max_risk']):.4g}"), (row["max_risk"], committed)
+
+
+FAST_CELLS = [
+    ("rmpc:worst_case", "low", 0.0),
+    ("rmpc:grid", "high", 2500.0),
+    ("smpc:exact", "medium", 1500.0),
+    ("smpc:exact", "high", 0.0),
+    ("smpc:monte_carlo", "low", 500.0),
+    ("ppo:penalty", "medium", 1000.0),
+]
+"""A few Table II configurations, one per agent and level, for the default run."""
+
+
+@pytest.mark.parametrize(("agent", "level", "epsilon"), FAST_CELLS)
+def test_table2_cells_are_as_committed(agent, level, epsilon):
+    if agent.startswith("ppo"):
+        pytest.importorskip("stable_baselines3")
+    (spec,) = table2.specs_for([agent], [level], [epsilon], {})
+    row, _ = table2.run_one(spec)
+    _assert_as_committed(row, _committed()[(row["method"], row["risk_method"], level, epsilon)])
+
+
+@pytest.mark.slow
+def test_the_whole_table2_is_as_committed(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    rows = table2.main(["--out", str(tmp_path), "--no-figures", "--workers", "2"])
+    committed = _committed()
+    assert len(rows) == len(committed) == 108
+    for row in rows:
+        _assert_as_committed(
+            row, committed[(row["method"], row["risk_method"], row["uncertainty"], row["epsilon"])]
+        )
+
+
 def test_sampled_takes_tolerances_in_each_severitys_unit():
     parse = sampled.parse_tolerances
     assert parse(["0,1000"], ["paper", "plastic"]) == {"paper": [0.0, 1000.0], "plastic": [0.0, 1000.0]}
@@ -204,3 +266,35 @@ def test_table2_takes_the_injury_severity_in_its_unit(tmp_path, capsys):
     assert 0.0 <= row["max_risk"] <= 0.005 * (1 + 1e-6)
     assert math.isnan(row["paper_e_acc"])  # the paper's figures belong to its severity
     assert "injuries" in (tmp_path / "table2.md").read_text()
+
+
+def test_table2_and_sampled_run_a_scene_with_several_objects(tmp_path):
+    argv = ["--uncertainty", "low", "--tolerances", "0", "--scene", "two_crossing", "--workers", "1"]
+    with pytest.warns(UserWarning, match="first present object of its observation only"):
+        (row,) = table2.main(["--methods", "rmpc:worst_case", "--out", str(tmp_path / "t2"), *argv])
+    assert math.isnan(row["paper_e_acc"])  # the paper's figures are for its own scene
+    runs = np.load(tmp_path / "t2" / "table2_runs.npz")
+    objects = runs["RMPC/worst_case/low/eps=0/objects"]
+    assert (
+        objects.shape == (row["steps"] + 1, 2, 4)
+        and runs["RMPC/worst_case/low/eps=0/risk_terms"].shape[1] == 2
+    )
+    np.testing.assert_array_equal(objects[:, 0], runs["RMPC/worst_case/low/eps=0/object"])
+    assert "Scene `two_crossing`" in (tmp_path / "t2" / "table2.md").read_text()
+    assert (tmp_path / "t2" / "fig3_trajectories.png").read_bytes()[:4] == b"\x89PNG"
+    argv = [
+        "--agents",
+        "smpc:exact",
+        "--severities",
+        "paper",
+        "--episodes",
+        "2",
+        "--out",
+        str(tmp_path / "s"),
+    ]
+    with pytest.warns(UserWarning, match="first present object"):
+        (row,) = sampled.main([*argv, "--uncertainty", "low", "--tolerances", "0", "--scene", "two_crossing"])
+    assert row["scene"] == "two_crossing" and row["episodes"] == 2
+    assert "Scene two_crossing" in (tmp_path / "s" / "sampled.md").read_text()
+    with pytest.raises(SystemExit):
+        table2.parse_args(["--scene", "three_crossing"])

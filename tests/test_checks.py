@@ -292,12 +292,20 @@ def test_a_scenario_at_the_observation_bounds_stays_in_the_box():
 
 
 def test_observation_bounds_live_in_the_observation_module():
-    high = observation.bounds()
+    low, high = observation.bounds()
     box = make().observation_space
     np.testing.assert_array_equal(box.high, high)
-    np.testing.assert_array_equal(box.low, -high)
+    np.testing.assert_array_equal(box.low, low)
     assert high[observation.PROGRESS] == observation.POSITION_BOUND
     assert set(np.flatnonzero(high == np.float32(np.pi))) == set(observation.HEADINGS)
+    assert (low[observation.PRESENT], high[observation.PRESENT]) == (0.0, 1.0)  # the flag
+    flags = np.zeros(observation.SIZE, dtype=bool)
+    flags[observation.PRESENT] = True
+    np.testing.assert_array_equal(low[~flags], -high[~flags])
+    low3, high3 = observation.bounds(3)
+    box3 = make(object_slots=3).observation_space
+    np.testing.assert_array_equal(box3.low, low3)
+    np.testing.assert_array_equal(high3[observation.slot(2)], high[observation.slot(0)])
 
 
 # ---------------------------------------------------------------- stepping past the end
@@ -407,13 +415,26 @@ def test_as_batch_rejects_an_empty_batch_and_non_real_observations():
     assert not single and obs.shape == (2, 15) and obs.dtype == np.float64
 
 
+def test_an_observation_with_other_object_slots_is_named_so():
+    with pytest.raises(
+        ValueError, match=r"got \(22,\) \(an observation with 2 object slot\(s\); this agent reads 1\)"
+    ):
+        as_batch(np.zeros(22), observation.SIZE)
+    with pytest.raises(
+        ValueError, match=r"got \(3, 16\) \(an observation with 1 object slot\(s\); this agent reads 2\)"
+    ):
+        as_batch(np.zeros((3, 16)), observation.size(2))
+    with pytest.raises(ValueError, match=r"got \(15,\)$"):  # no observation of ours: no hint
+        as_batch(np.zeros(15), observation.SIZE)
+
+
 @pytest.mark.parametrize("agent_name", ["RMPC", "SMPC"])
 def test_agents_reject_an_empty_batch_by_name(agent_name):
     import agents
 
     agent = getattr(agents, agent_name)(Scenario.preset("low", horizon=3))
-    with pytest.raises(ValueError, match=r"observation is an empty batch, shape \(0, 15\)"):
-        agent.predict(np.zeros((0, 15)))
+    with pytest.raises(ValueError, match=r"observation is an empty batch, shape \(0, 16\)"):
+        agent.predict(np.zeros((0, 16)))
 
 
 def test_ppo_agent_rejects_an_empty_batch():
@@ -423,7 +444,7 @@ def test_ppo_agent_rejects_an_empty_batch():
 
     agent = PPOAgent.load(Path(agents.__file__).parent / "models" / "ppo_penalty.zip")
     with pytest.raises(ValueError, match="empty batch"):
-        agent.predict(np.zeros((0, 15), dtype=np.float32))
+        agent.predict(np.zeros((0, 16), dtype=np.float32))
 
 
 # ---------------------------------------------------------------- the helpers

@@ -108,8 +108,8 @@ def test_defaults_are_the_papers_low_preset():
     assert env.estimator.name == "exact"
     assert env.object_motion == "paper"
     assert env.metadata["render_fps"] == pytest.approx(2.0)
-    assert RiskCrossingEnv.observation_slices is observation.SLICES
-    assert env.observation_space.shape == (observation.SIZE,)
+    assert env.observation_slices == observation.SLICES and env.object_slots == 1
+    assert env.observation_space.shape == (observation.SIZE,) == (16,)
     assert env.observation_space.dtype == np.float32
     assert np.all(np.isfinite(env.observation_space.low))
 
@@ -197,6 +197,10 @@ _INFO_TYPES = {
     "risk_violation": bool,
     "collision": bool,
     "distance": float,
+    "closest_object": int,
+    "risk_terms": np.ndarray,
+    "objects": np.ndarray,
+    "present": np.ndarray,
     "path_error": np.ndarray,
     "lambda": float,
     "ego": np.ndarray,
@@ -215,11 +219,13 @@ def test_info_keys_and_types_at_reset_and_step():
         for key, kind in _INFO_TYPES.items():
             assert type(info[key]) is kind, key
         assert info["path_error"].shape == (4,) and info["ego"].shape == (4,)
-        assert info["object"].shape == (4,)
+        assert info["object"].shape == (4,) and info["objects"].shape == (1, 4)
+        assert info["risk_terms"].shape == (1,) and info["risk_terms"][0] == info["risk"]
+        assert info["present"].tolist() == [True] and info["closest_object"] == 0
         assert set(info["rewards"]) == {"path_error", "risk"}
     assert reset_info["risk"] == 0.0 and reset_info["rewards"] == {"path_error": 0.0, "risk": 0.0}
     assert type(reward) is float and type(terminated) is bool and type(truncated) is bool
-    assert obs1.dtype == np.float32 and obs1.shape == (15,)
+    assert obs1.dtype == np.float32 and obs1.shape == (16,)
 
 
 def test_observation_matches_info():
@@ -413,3 +419,91 @@ def test_episode_risk_sums_the_risk_since_reset():
             assert info["episode_risk"] == total
             done = terminated or truncated
         assert total > 0.0  # the episodes pass the object
+
+
+# ---------------------------------------------------------------- several objects
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"scene": "two_crossing"},
+        {
+            "scene": "two_crossing",
+            "object_slots": 3,
+            "object_motion": "sampled",
+            "risk_estimator": "monte_carlo",
+        },
+        {"scene": "four_crossing", "randomize": True, "variations": risk_env.Variations(object_count=True)},
+    ],
+)
+def test_check_env_with_several_objects(kwargs):
+    checked(gym.make(ENV_ID, render_mode="rgb_array", renderer="basic", **kwargs).unwrapped)
+
+
+def test_sb3_checker_passes_with_several_objects():
+    env_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    for kwargs in ({}, {"scene": "two_crossing", "object_slots": 3}):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # its advice on unnormalised Box spaces
+            env_checker.check_env(gym.make(ENV_ID, **kwargs), warn=True)
+
+
+def test_scene_and_slots_arguments():
+    env = make(scene="two_crossing", uncertainty="high")
+    assert env.scenario == Scenario.preset("high", scene="two_crossing") and env.object_slots == 2
+    assert env.observation_space.shape == (observation.size(2),) and len(env.estimators) == 2
+    obs, info = env.reset(seed=0)
+    assert info["objects"].shape == (2, 4) and info["risk_terms"].shape == (2,)
+    np.testing.assert_array_equal(info["object"], info["objects"][0])
+    assert env.observation_slices["object_1"] == observation.slot(1)
+    with pytest.raises(ValueError, match=r"2 objects but object_slots = 1: objects\[1\] would have no"):
+        make(scene="two_crossing", object_slots=1)
+    with pytest.raises(ValueError, match="object_slots must be an integer >= 1"):
+        make(object_slots=0)
+    with pytest.raises(TypeError, match="object_slots must be an integer"):
+        make(object_slots=2.0)
+    with pytest.raises(ValueError, match="unknown scene 'three'"):
+        make(scene="three")
+    with pytest.raises(TypeError, match="not both.*'scene'"):
+        make(scenario=Scenario(), scene="two_crossing")
+    with pytest.raises(ValueError, match=r"objects\[1\]\.radius must be > 0"):
+        make(objects=[{}, {"radius": -1.0}])
+
+
+def test_randomized_object_counts_flag_absent_slots():
+    env = make(scene="four_crossing", randomize=True, variations=risk_env.Variations(object_count=True))
+    counts = set()
+    for seed in range(40):
+        obs, info = env.reset(seed=seed)
+        m = len(env.scenario.objects)
+        counts.add(m)
+        parts = observation.split(obs, slots=4)
+        assert parts.present.tolist() == [i < m for i in range(4)] == info["present"].tolist()
+        assert np.all(info["objects"][m:] == 0.0) and info["risk_terms"].shape == (4,)
+        obs, _, _, _, info = env.step(act(4.0))
+        assert np.all(info["risk_terms"][m:] == 0.0)
+        assert env.object_measurements.shape == (m, 5)
+    assert counts == {1, 2, 3, 4}
+    # without object_count the draws are those of a single-object scenario's, object by object
+    one, two = make(randomize=True), make(randomize=True, scene="two_crossing")
+    one.reset(seed=3)
+    two.reset(seed=3)
+    assert one.scenario.path == two.scenario.path and one.scenario.object == two.scenario.object
+
+
+def test_single_object_episodes_are_what_they_were():
+    """A seeded single-object episode in numbers recorded before the object slots (sampled
+    motion, randomised start, Monte Carlo risk: every draw in its old order)."""
+    env = make(
+        randomize=True,
+        object_motion="sampled",
+        risk_estimator="monte_carlo",
+        mc_samples=64,
+        uncertainty="high",
+        object_start=(0.0, 2.0, 1.57),
+    )
+    env.reset(seed=7)
+    for _ in range(6):
+        _, _, _, _, info = env.step(act(3.0, 0.1))
+    recorded = [-1.8997528111506896, 10.166160269994217, 1.2734591827393456, 2.404035460734087]
+    assert info["object"].tolist() == recorded
+    assert info["episode_risk"] == 4277.514743041258

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import special
 
-from risk_env import Scenario, make_estimator, predict
+from risk_env import Scenario, make_estimator, observation, predict
 from risk_env.dynamics import unicycle_step
 from risk_env.ops import CASADI, MATH, NUMPY
 from risk_env.path import PathBatch, path_error, point, project
@@ -119,26 +119,58 @@ def test_truncated_normal_draws() -> None:
 
 @pytest.mark.parametrize("motion", ["paper", "sampled"])
 def test_transition(motion: str) -> None:
+    """One state in floats == a batch in arrays: the move, and the observation with three objects
+    in four slots, each present in some copies only."""
     s = Scenario.preset("high")
-    n = 60
+    n, m, slots = 60, 3, 4
     ego = RNG.uniform([-20, -20, -4, -4, -0.8], [60, 20, 4, 8, 0.8], (n, 5))
-    obj = RNG.uniform([-20, -20, -3, -2, -0.5], [20, 20, 3, 5, 0.5], (n, 5))
+    obj = RNG.uniform([-20, -20, -3, -2, -0.5], [20, 20, 3, 5, 0.5], (m, n, 5))
+    present = RNG.uniform(0, 1, (m, n)) < 0.7
+    present[0, :5] = True  # copies with every object
+    present[:, 5:10] = True
+    radii = (3.0, 2.5, 4.0)
     u = RNG.uniform(0, 1, (n, 3)) if motion == "sampled" else None
-    belief = predict_step(s, tuple(obj.T), 1, NUMPY)
-    batch = np.stack(move_object(belief, tuple(obj.T), u, NUMPY), -1)
+    belief = predict_step(s, tuple(obj[0].T), 1, NUMPY)
+    batch = np.stack(move_object(belief, tuple(obj[0].T), u, NUMPY), -1)
     path = s.path
-    seen = observe(PathBatch(np.full(n, path.curvature), path.goal), 4.0, 3.0, ego.T[:3], ego.T[3:], obj.T)
+    objects = [tuple(o.T) for o in obj]
+    seen = observe(
+        PathBatch(np.full(n, path.curvature), path.goal),
+        4.0,
+        radii,
+        ego.T[:3],
+        ego.T[3:],
+        objects,
+        slots,
+        list(present),
+        NUMPY,
+    )
+    assert seen.obs.shape == (n, observation.size(slots))
     for i in range(n):
-        one = predict_step(s, tuple(obj[i].tolist()), 1, MATH)
-        moved = move_object(one, tuple(obj[i].tolist()), None if u is None else u[i].tolist(), MATH)
+        one = predict_step(s, tuple(obj[0, i].tolist()), 1, MATH)
+        moved = move_object(one, tuple(obj[0, i].tolist()), None if u is None else u[i].tolist(), MATH)
         np.testing.assert_allclose(moved, batch[i], rtol=TOL, atol=TOL)
         e = ego[i].tolist()
-        single = observe(path, 4.0, 3.0, e[:3], e[3:], tuple(obj[i].tolist()), MATH)
+        flags = [bool(p) for p in present[:, i]]
+        single = observe(path, 4.0, radii, e[:3], e[3:], [o[i].tolist() for o in obj], slots, flags, MATH)
         np.testing.assert_allclose(single.obs, seen.obs[i], rtol=1e-7)  # float32
         np.testing.assert_allclose(single.path_error, seen.path_error[i], rtol=TOL, atol=TOL)
         for name in ("lam", "distance", "error_norm"):
             assert getattr(single, name) == pytest.approx(getattr(seen, name)[i], rel=TOL, abs=TOL)
-        assert (single.collision, single.goal) == (seen.collision[i], seen.goal[i])
+        assert (single.collision, single.goal, single.closest) == (
+            seen.collision[i],
+            seen.goal[i],
+            seen.closest[i],
+        )
+        # against the definitions: the nearest present object, a collision with any of them
+        gaps = [np.hypot(e[0] - o[i, 0], e[1] - o[i, 1]) if p else np.inf for o, p in zip(obj, flags)]
+        assert single.distance == pytest.approx(min(gaps), rel=TOL) and single.closest == int(np.argmin(gaps))
+        assert single.collision == any(g <= r for g, r in zip(gaps, radii))
+        parts = observation.split(single.obs)
+        assert parts.present.tolist() == [*flags, False]
+        np.testing.assert_allclose(
+            parts.objects[:m][present[:, i]][:, :2], obj[present[:, i], i, :2], rtol=1e-6
+        )
 
 
 def test_variations_draw_faces_and_vary() -> None:
@@ -149,15 +181,16 @@ def test_variations_draw_faces_and_vary() -> None:
         one = draw(base, u[:, i].tolist(), Variations(curvature=0.01))
         assert one.curvature == batch.curvature[i]  # clipped to the same limit
         np.testing.assert_allclose(one.ego, np.array(batch.ego)[:, i], rtol=TOL, atol=TOL)
-        np.testing.assert_allclose(one.object, np.array(batch.object)[:, i], rtol=TOL, atol=TOL)
-        assert one.object_speed == pytest.approx(batch.object_speed[i], rel=TOL)
+        np.testing.assert_allclose(one.objects, np.array(batch.objects)[:, :, i], rtol=TOL, atol=TOL)
+        assert one.count is None and batch.count is None
     rng, again = np.random.default_rng(4), np.random.default_rng(4)
     s = vary(base, rng)
     start = draw(base, again.uniform(-1.0, 1.0, size=DRAWS).tolist())
-    assert (s.path.curvature, s.ego.start.as_tuple(), s.object.speed) == (
+    assert (s.path.curvature, s.ego.start.as_tuple(), s.object.start.as_tuple(), s.object.speed) == (
         start.curvature,
         start.ego,
-        start.object_speed,
+        start.objects[0][:3],
+        start.objects[0][3],
     )
 
 

@@ -19,7 +19,7 @@ import pytest
 pytest.importorskip("highway_env")
 
 from agents import RMPC, SMPC  # noqa: E402
-from risk_env import ENV_ID  # noqa: E402
+from risk_env import ENV_ID, observation  # noqa: E402
 from risk_env.dynamics import unicycle_step  # noqa: E402
 from risk_env.highway import (  # noqa: E402
     IDMEgo,
@@ -208,7 +208,9 @@ def test_adapter_drives_intersection_v1():
         assert state is None and action.shape == (2,) and action.dtype == np.float32
         assert np.all(np.abs(action) <= 1.0)
         ours = adapter.last_observation
-        assert ours.shape == (15,) and np.all(np.isfinite(ours))
+        assert ours.shape == (16,) and np.all(np.isfinite(ours))
+        seen = observation.split(ours, slots=1).object_measurement[[0, 1, 3, 4]]
+        np.testing.assert_allclose(seen, adapter.last_object[[0, 1, 3, 4]], rtol=1e-6, atol=1e-4)
         np.testing.assert_allclose(ours[:2], vehicle.position, atol=1e-4)
         # the object is a vehicle on the road (or the far stand-in when none is seen)
         others = [v for v in env.unwrapped.road.vehicles if v is not vehicle]
@@ -317,6 +319,18 @@ def test_highway_renderer_draws_the_scene_headless():
     assert isinstance(auto.unwrapped._renderer, G.HighwayRenderer)
     with pytest.raises(ValueError, match="unknown renderer 'fancy'"):
         gym.make(ENV_ID, renderer="fancy")
+
+
+def test_highway_renderer_draws_every_object():
+    env = gym.make(ENV_ID, render_mode="rgb_array", renderer="highway", scene="two_crossing")
+    env.reset(seed=0)
+    env.step(np.array([2.0, 0.0], dtype=np.float32))
+    frame = env.render()
+    renderer = env.unwrapped._renderer
+    assert len(renderer._objects) == 2
+    for x, y, *_ in env.unwrapped.object_measurements:
+        u, w = np.round(renderer._to_px(x + 0.5, y)).astype(int)
+        assert tuple(frame[w, u]) == G.OBJECT
 
 
 def test_monte_carlo_draws_are_drawn_and_seeded():

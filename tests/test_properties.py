@@ -66,8 +66,32 @@ def real(low: float, high: float) -> st.SearchStrategy[float]:
 
 
 @st.composite
-def scenarios(draw: st.DrawFn, max_steps: int = 20, horizon: int | None = None) -> Scenario:
-    """The paper's scenario with fuzzed starts, speeds, path, tolerance and severity.
+def crossing_objects(draw: st.DrawFn, near: tuple[float, float]) -> dict[str, Any]:
+    """One object as an ``objects=`` dict: within 15 m of ``near`` half of the time, else anywhere
+    around the path; its own radius, mass and (sometimes) uncertainty."""
+    if draw(st.booleans()):
+        start = (near[0] + draw(real(-15, 15)), near[1] + draw(real(-15, 15)))
+    else:
+        start = (draw(real(-30, 80)), draw(real(-30, 30)))
+    spec = {
+        "start": (*start, draw(real(-math.pi, math.pi))),
+        "speed": draw(real(-5.0, 5.0)),
+        "turn_rate": draw(real(-0.5, 0.5)),
+        "radius": draw(real(0.3, 3.0)),
+        "mass": draw(real(100.0, 3000.0)),
+    }
+    own = draw(st.sampled_from((None, *UNCERTAINTY_PRESETS)))
+    if own is not None:
+        spec["uncertainty"] = own
+    return spec
+
+
+@st.composite
+def scenarios(
+    draw: st.DrawFn, max_steps: int = 20, horizon: int | None = None, many: bool = False
+) -> Scenario:
+    """The paper's scenario with fuzzed starts, speeds, path, tolerance and severity; ``many``:
+    with up to two more objects half of the time (:func:`crossing_objects`).
 
     The ego starts near the path (so episodes reach the goal sometimes), the object within 15 m
     of it half of the time (so collisions and nonzero risk happen).
@@ -104,6 +128,8 @@ def scenarios(draw: st.DrawFn, max_steps: int = 20, horizon: int | None = None) 
     }
     if horizon is not None:
         overrides["horizon"] = horizon
+    if many and draw(st.booleans()):
+        overrides["objects"] = [{}, *draw(st.lists(crossing_objects(ego_start[:2]), min_size=1, max_size=2))]
     return base.replace(**overrides)
 
 
@@ -147,16 +173,17 @@ def observations(draw: st.DrawFn, scenario: Scenario) -> np.ndarray:
         draw(real(v_lo, v_hi)),
         draw(real(-0.5, 0.5)),
     )
-    return observe(s.path, ego.v_ref, s.collision_distance, pose, ego_input, measurement).obs
+    return observe(s.path, ego.v_ref, s.collision_distances, pose, ego_input, [measurement], 1).obs
 
 
 @st.composite
 def env_cases(draw: st.DrawFn, max_steps: int = 20) -> dict[str, Any]:
     """A scenario, the env's estimator and object motion, a seed and an action per step."""
-    scenario = draw(scenarios(max_steps=max_steps))
+    scenario = draw(scenarios(max_steps=max_steps, many=True))
     plan = draw(st.lists(actions(scenario), min_size=scenario.max_steps, max_size=scenario.max_steps))
     return {
         "scenario": scenario,
+        "object_slots": len(scenario.objects) + draw(st.sampled_from((0, 0, 1))),
         "risk_estimator": draw(st.sampled_from(ESTIMATOR_NAMES)),
         "object_motion": draw(st.sampled_from(OBJECT_MOTIONS)),
         "seed": draw(st.integers(0, 2**32 - 1)),
@@ -170,6 +197,7 @@ def make_env(case: dict[str, Any], **kwargs: Any) -> RiskCrossingEnv:
         scenario=case["scenario"],
         risk_estimator=case["risk_estimator"],
         object_motion=case["object_motion"],
+        object_slots=case.get("object_slots"),
         **kwargs,
     )
 
@@ -177,20 +205,27 @@ def make_env(case: dict[str, Any], **kwargs: Any) -> RiskCrossingEnv:
 def check_step(env: RiskCrossingEnv, obs: np.ndarray, info: dict[str, Any]) -> None:
     """The invariants of one step's observation and info (also those of reset)."""
     s = env.scenario
-    assert obs.dtype == np.float32 and obs.shape == (ob.SIZE,)
+    assert obs.dtype == np.float32 and obs.shape == (ob.size(env.object_slots),)
     assert env.observation_space.contains(obs), obs
-    risk = info["risk"]
+    risk, terms = info["risk"], info["risk_terms"]
     assert math.isfinite(risk) and risk >= 0.0, risk
+    assert terms.shape == (len(env.base_scenario.objects),) and np.all(terms >= 0.0)
+    assert risk == pytest.approx(math.fsum(terms), rel=1e-12, abs=1e-300)
     assert info["cost"] == risk
     assert info["risk_violation"] == (risk > s.risk_tolerance)
-    ego, obj = info["ego"], info["object"]
-    distance = math.hypot(ego[0] - obj[0], ego[1] - obj[1])
-    assert info["distance"] == pytest.approx(distance, rel=1e-12, abs=1e-9)
-    assert info["collision"] == (distance <= s.collision_distance)
+    ego, objects = info["ego"], info["objects"][info["present"]]
+    np.testing.assert_array_equal(info["object"], objects[0])
+    gaps = np.hypot(ego[0] - objects[:, 0], ego[1] - objects[:, 1])
+    assert info["distance"] == pytest.approx(gaps.min(), rel=1e-12, abs=1e-9)
+    assert gaps[info["closest_object"]] == pytest.approx(gaps.min(), rel=1e-12, abs=1e-9)
+    assert info["collision"] == bool(np.any(gaps <= np.array(s.collision_distances)))
     # the observation reports the true states
+    parts = ob.split(obs, env.object_slots)
+    assert parts.present.tolist() == [i < len(objects) for i in range(env.object_slots)]
     np.testing.assert_array_equal(obs[ob.EGO_POSE][:2], ego[:2].astype(np.float32))
-    np.testing.assert_array_equal(obs[ob.OBJECT_POSE][:2], obj[:2].astype(np.float32))
-    assert obs[ob.EGO_INPUT][0] == np.float32(ego[3]) and obs[ob.OBJECT_INPUT][0] == np.float32(obj[3])
+    np.testing.assert_array_equal(parts.objects[parts.present][:, :2], objects[:, :2].astype(np.float32))
+    assert obs[ob.EGO_INPUT][0] == np.float32(ego[3])
+    np.testing.assert_array_equal(parts.objects[parts.present][:, 3], objects[:, 3].astype(np.float32))
 
 
 def run_episode(env: RiskCrossingEnv, case: dict[str, Any], family: str = "env") -> list[tuple]:
@@ -258,6 +293,7 @@ def batched_invariants(case: dict[str, Any], num_envs: int, mode: str) -> None:
         scenario=s,
         risk_estimator=case["risk_estimator"],
         object_motion=case["object_motion"],
+        object_slots=case["object_slots"],
         autoreset_mode=mode,
     )
     obs, _ = env.reset(seed=case["seed"])
@@ -273,10 +309,13 @@ def batched_invariants(case: dict[str, Any], num_envs: int, mode: str) -> None:
         assert np.all(np.isfinite(risk)) and np.all(risk >= 0.0)
         np.testing.assert_array_equal(info["cost"], risk)
         np.testing.assert_array_equal(info["risk_violation"], risk > s.risk_tolerance)
-        ego, obj = info["ego"], info["object"]
-        distance = np.hypot(ego[:, 0] - obj[:, 0], ego[:, 1] - obj[:, 1])
-        np.testing.assert_allclose(info["distance"], distance, rtol=1e-12, atol=1e-9)
-        np.testing.assert_array_equal(info["collision"], distance <= s.collision_distance)
+        np.testing.assert_allclose(info["risk_terms"].sum(axis=1), risk, rtol=1e-12, atol=1e-300)
+        ego, objects = info["ego"], info["objects"]
+        gaps = np.hypot(ego[:, None, 0] - objects[:, :, 0], ego[:, None, 1] - objects[:, :, 1])
+        np.testing.assert_allclose(info["distance"], gaps.min(axis=1), rtol=1e-12, atol=1e-9)
+        np.testing.assert_array_equal(
+            info["collision"], np.any(gaps <= np.array(s.collision_distances), axis=1)
+        )
         assert np.all(np.isfinite(rewards))
     env.close()
 

@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+import risk_env
 from risk_env import ENV_ID
 from risk_env import rendering as R
 
@@ -110,3 +111,21 @@ def test_rgb_array_is_headless_in_a_fresh_process():
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split()[0] == "dummy"
+
+
+def test_every_object_and_its_boxes_are_drawn():
+    env = rgb_env(scene="two_crossing", uncertainty="medium")
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.array([2.0, 0.0], dtype=np.float32))
+    frame = env.render()
+    renderer = env.unwrapped._renderer
+    for x, y, theta, *_ in env.unwrapped.object_measurements:  # each disc, beside its heading line
+        assert pixel(frame, renderer, x + 0.7 * np.sin(theta), y - 0.7 * np.cos(theta)) == R.OBJECT
+    # each object's nearest truncation box: its left edge, at the belief's mean height
+    for i, measurement in enumerate(env.unwrapped.object_measurements):
+        belief = risk_env.predict(env.unwrapped.scenario.for_object(i), measurement, steps=1)[1]
+        edge = renderer._to_px(float(belief.x - belief.half_x), float(belief.y))
+        u, w = np.round(edge).astype(int)
+        assert any(tuple(frame[w, u + k]) == R.BOX_NEAR for k in (-1, 0, 1)), i
+    env.close()

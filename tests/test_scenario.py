@@ -5,7 +5,16 @@ import re
 import numpy as np
 import pytest
 
-from risk_env.scenario import OVERRIDES, RISK_TOLERANCES, Pose, Scenario, Uncertainty
+from risk_env.path import point, project
+from risk_env.scenario import (
+    OVERRIDES,
+    RISK_TOLERANCES,
+    SCENE_NAMES,
+    CrossingObject,
+    Pose,
+    Scenario,
+    Uncertainty,
+)
 
 
 def test_paper_numbers():
@@ -159,3 +168,114 @@ def test_observation_reach_of_the_paper_scenario():
     assert reach["object speed"][0] == 6.0
     assert reach["ego turn rate"][0] == pytest.approx(0.8, rel=1e-5)
     assert all(value <= bound for value, bound, _, _ in reach.values())
+
+
+# ---------------------------------------------------------------- several objects
+def test_the_default_is_the_papers_single_object():
+    s = Scenario.preset("low")
+    assert len(s.objects) == 1 and s.object is s.objects[0]
+    assert s.object == CrossingObject() and s.object.uncertainty is None
+    assert s.collision_distances == (s.collision_distance,) == (3.0,)
+    assert s.uncertainties == (s.uncertainty,)
+    assert s.for_object(0) is s
+    assert Scenario.preset("low", scene="paper") == s
+
+
+def test_objects_from_dicts_with_their_own_numbers():
+    s = Scenario.preset(
+        "low",
+        objects=[
+            {"start": (1.0, 2.0, 0.5), "speed": 2.0, "turn_rate": 0.1},
+            CrossingObject(start=Pose(3.0, 4.0, 0.0), radius=2.0),
+            {"start": (5.0, 6.0, 1.0), "speed": 1.0, "mass": 80.0, "radius": 0.5, "uncertainty": "high"},
+            {"speed": 1.0, "sigma_growth": (0.3, 0.3, 0.3), "box_growth": [2, 2, 2]},
+        ],
+    )
+    assert len(s.objects) == 4 and all(isinstance(o, CrossingObject) for o in s.objects)
+    assert s.object.start == Pose(1.0, 2.0, 0.5) and s.object.turn_rate == 0.1
+    assert s.objects[1].radius == 2.0 and s.collision_distances == (3.0, 3.5, 2.0, 3.0)
+    assert s.objects[2].mass == 80.0 and s.objects[2].uncertainty == Uncertainty.preset("high")
+    # uncertainty keys start from the scenario's: only the named fields change
+    own = s.objects[3].uncertainty
+    assert own.sigma_growth == (0.3, 0.3, 0.3) and own.box_growth == (2.0, 2.0, 2.0)
+    assert own.velocity_bounds0 == s.uncertainty.velocity_bounds0
+    assert s.uncertainties == (s.uncertainty, s.uncertainty, Uncertainty.preset("high"), own)
+    # the view of one object: its numbers, its uncertainty as the scenario's
+    view = s.for_object(2)
+    assert view.objects == (dataclasses.replace(s.objects[2], uncertainty=None),)
+    assert view.uncertainty == Uncertainty.preset("high") and view.collision_distance == 2.0
+    assert (view.ego, view.path, view.dt) == (s.ego, s.path, s.dt)
+
+
+def test_flat_object_overrides_change_the_first_object():
+    s = Scenario.preset("low", scene="two_crossing", object_speed=2.0, object_mass=500.0)
+    assert (s.object.speed, s.object.mass) == (2.0, 500.0)
+    assert s.objects[1] == Scenario.preset("low", scene="two_crossing").objects[1]
+    t = Scenario.preset("low", objects=[{"speed": 1.0}, {"speed": -1.0}], object_start=(0.0, 0.0, 0.0))
+    assert t.object.start == Pose(0.0, 0.0, 0.0) and t.object.speed == 1.0 and t.objects[1].speed == -1.0
+    assert s.replace(object_speed=1.0).objects[1] == s.objects[1]
+
+
+def test_scenes():
+    two = Scenario.preset("medium", scene="two_crossing")
+    assert len(two.objects) == 2 and two.objects[0] == Scenario.preset("medium").object
+    second = two.objects[1]
+    # the second crosses from the other side of the path: north of it, heading south
+    lam = float(project(two.path, second.start.x, second.start.y))
+    px, py, _ = point(two.path, lam)
+    assert second.start.y > py + 10.0 and math.sin(second.start.theta) < -0.99
+    assert len(Scenario.preset(scene="four_crossing").objects) == 4
+    assert set(SCENE_NAMES) == {"paper", "two_crossing", "four_crossing"}
+    with pytest.raises(ValueError, match=r"unknown scene 'two_crosing' \(did you mean 'two_crossing'\?\)"):
+        Scenario.preset("low", scene="two_crosing")
+
+
+@pytest.mark.parametrize(
+    ("objects", "error", "message"),
+    [
+        ([{}, {"speed": None}], TypeError, r"objects\[1\]\.speed must be a real number .*got None"),
+        ([{}, {"speed": float("nan")}], ValueError, r"objects\[1\]\.speed must be finite, got nan"),
+        ([{"radius": -1.0}], ValueError, r"objects\[0\]\.radius must be > 0, got -1\.0"),
+        ([{}, {}, {"mass": -5}], ValueError, r"objects\[2\]\.mass must be > 0, got -5"),
+        ([{}, {"start": (1.0, float("inf"), 0.0)}], ValueError, r"objects\[1\]\.start\[1\] must be finite"),
+        ([{}, {"start": (1.0, 2.0)}], ValueError, r"objects\[1\]\.start must have 3 entries"),
+        ([{}, {"sped": 2.0}], TypeError, r"unknown key 'sped' in objects\[1\]; did you mean speed\?"),
+        ([{"uncertainty": "extreme"}], ValueError, r"unknown objects\[0\]\.uncertainty 'extreme'"),
+        ([{"uncertainty": 3}], TypeError, r"objects\[0\]\.uncertainty must be an Uncertainty"),
+        ([{"sigma_growth": (0.1, -1.0, 0.1)}], ValueError, r"objects\[0\]\.uncertainty\.sigma_growth\[1\]"),
+        ([{}, {"speed": 7.0}], ValueError, r"objects\[1\]\.speed 7\.0 m/s lies outside .* uncertainty\."),
+        (
+            [{}, {"speed": 2.0, "velocity_bounds0": (3.0, 4.0)}],
+            ValueError,
+            r"objects\[1\]\.speed 2\.0 m/s .* objects\[1\]\.uncertainty\.velocity_bounds0",
+        ),
+        (
+            [{}, {"start": (2e5, 0.0, 0.0)}],
+            ValueError,
+            r"objects\[1\] position can reach .* objects\[1\]\.start",
+        ),
+        (
+            [{}, {"turn_rate": 2e3}],
+            ValueError,
+            r"objects\[1\] turn rate can reach 2000 .* objects\[1\]\.turn_rate",
+        ),
+        ([], ValueError, "objects must hold at least one object"),
+        ({"speed": 1.0}, TypeError, "objects must be a sequence of CrossingObject or dicts"),
+        ([{}, 3.0], TypeError, r"objects\[1\] must be a CrossingObject or a dict of its fields, got 3\.0"),
+    ],
+)
+def test_bad_objects_name_the_object_and_the_field(objects, error, message):
+    with pytest.raises(error, match=message):
+        Scenario.preset("low", objects=objects)
+
+
+def test_observation_reach_covers_every_object():
+    s = Scenario.preset(
+        "low", scene="two_crossing", objects=[{}, {"start": (25.0, 32.0, -1.5), "uncertainty": "high"}]
+    )
+    reach = s.observation_reach()
+    assert reach["objects[1] position"][0] == pytest.approx(
+        32.0 + 80 * (8.0 * 0.5 + 3.0)
+    )  # high: 5 + 3 m/s, 3 m
+    assert reach["objects[0] speed"][0] == 6.0 and reach["objects[1] speed"][0] == 8.0
+    assert "objects[1].uncertainty.box_growth" in reach["objects[1] position"][3]

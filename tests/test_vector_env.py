@@ -8,6 +8,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import risk_env
+from risk_env import Variations
 from risk_env.pcg64 import VECTORIZED_MIN, GeneratorBatch
 from risk_env.vector_env import SCALAR_COPIES, RiskCrossingVectorEnv
 
@@ -17,6 +18,38 @@ one-by-one path: rounding of the same formulas through different elementary-func
 RISK_TOL = 1e-12 * 0.5 * 1000.0 * 8.0**2 * 2
 """Absolute tolerance on risks [J]: the exact risk's kernels (one state, a batch) agree to 1e-12 in
 P, times the largest expected severity here (both masses 1000 kg, speeds up to 8 m/s)."""
+
+
+MANY = [
+    {"scene": "two_crossing", "object_motion": "sampled", "uncertainty": "high", "object_slots": 3},
+    {
+        "scene": "four_crossing",
+        "randomize": True,
+        "variations": Variations(object_count=True),
+        "object_motion": "sampled",
+        "uncertainty": "medium",
+    },
+    {
+        "scene": "two_crossing",
+        "risk_estimator": "monte_carlo",
+        "object_motion": "sampled",
+        "mc_samples": 50,
+        "randomize": True,
+    },
+    {
+        "objects": [
+            {"start": (-2.0, 2.0, 1.4), "speed": 2.0},
+            {"start": (8.0, 20.0, -1.6), "speed": 3.0, "mass": 1500.0, "radius": 2.0, "uncertainty": "high"},
+            {"start": (20.0, -3.0, 1.7), "speed": 1.0, "sigma_growth": (0.5, 0.5, 0.5), "radius": 1.0},
+        ],
+        "risk_estimator": "worst_case",
+        "object_motion": "sampled",
+        "randomize": True,
+        "variations": Variations(object_count=True),
+    },
+]
+"""Several objects: scenes, more slots than objects, per-object uncertainty, mass and radius,
+randomised counts, Monte Carlo and worst-case risk."""
 
 
 def _flatten(tree, prefix=""):
@@ -82,6 +115,7 @@ def _assert_same(a, b) -> None:
         {"randomize": True, "object_motion": "sampled", "uncertainty": "high", "risk_tolerance": 100.0},
         {"risk_estimator": "monte_carlo", "object_motion": "sampled", "mc_samples": 50},
         {"severity": "injury", "object_motion": "sampled", "uncertainty": "high", "risk_tolerance": 0.005},
+        *MANY,
     ],
 )
 def test_batched_equals_sync(autoreset, kwargs) -> None:
@@ -91,8 +125,11 @@ def test_batched_equals_sync(autoreset, kwargs) -> None:
     _assert_same(single, _run("one_by_one", autoreset, 90, **kwargs))
 
 
-def test_vectorised_generators_draw_what_each_copy_draws() -> None:
-    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 30}
+@pytest.mark.parametrize("scene", ["paper", "four_crossing"])
+def test_vectorised_generators_draw_what_each_copy_draws(scene) -> None:
+    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 30, "scene": scene}
+    if scene != "paper":
+        kwargs["variations"] = Variations(object_count=True)
     for estimator in ("exact", "monte_carlo"):
         single = _run("sync", AutoresetMode.SAME_STEP, 70, num_envs=5, risk_estimator=estimator, **kwargs)
         batched = _run(
@@ -101,9 +138,16 @@ def test_vectorised_generators_draw_what_each_copy_draws() -> None:
         _assert_same(single, batched)
 
 
-def test_large_batch_takes_the_vectorised_generators_and_agrees() -> None:
+@pytest.mark.parametrize("scene", ["paper", "two_crossing"])
+def test_large_batch_takes_the_vectorised_generators_and_agrees(scene) -> None:
     """128 copies: numpy path and batched generators by default; two copies against single envs."""
-    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 25, "uncertainty": "high"}
+    kwargs = {
+        "randomize": True,
+        "object_motion": "sampled",
+        "max_steps": 25,
+        "uncertainty": "high",
+        "scene": scene,
+    }
     n = VECTORIZED_MIN
     env = gym.make_vec(risk_env.ENV_ID, n, "vector_entry_point", **kwargs)
     assert env.unwrapped._generators._batch is not None and env.unwrapped.scalar_copies < n
@@ -125,6 +169,7 @@ def test_large_batch_takes_the_vectorised_generators_and_agrees() -> None:
             np.testing.assert_allclose(obs[i], o, rtol=TOL, atol=TOL)
             assert reward[i] == pytest.approx(r, rel=TOL, abs=TOL)
             assert info["risk"][i] == pytest.approx(inf["risk"], rel=TOL, abs=RISK_TOL)
+            np.testing.assert_allclose(info["risk_terms"][i], inf["risk_terms"], rtol=TOL, atol=RISK_TOL)
             assert (terminated[i], truncated[i]) == (te, tr)
             ended[j] = te or tr
 
@@ -141,7 +186,7 @@ def test_default_mode_is_batched() -> None:
     env = gym.make_vec(risk_env.ENV_ID, num_envs=4)
     assert isinstance(env.unwrapped, RiskCrossingVectorEnv)
     obs, info = env.reset(seed=0)
-    assert obs.shape == (4, 15) and obs.dtype == np.float32
+    assert obs.shape == (4, 16) and obs.dtype == np.float32
     assert env.observation_space.contains(obs)
     assert info["risk"].shape == (4,) and info["path_error"].shape == (4, 4)
 

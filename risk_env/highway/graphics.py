@@ -3,9 +3,9 @@ on any highway-env scene.
 
 - :class:`HighwayRenderer`: the env's ``renderer="highway"`` (the default when highway-env is
   installed). The reference arc is a highway-env lane (a ``CircularLane`` fitted to the arc, or a
-  ``StraightLane`` for curvature 0), the object's constant-input course another, the ego and the
-  object are highway-env vehicles, and on top: the collision discs, the object's truncation boxes
-  and means over the horizon, its Monte Carlo draws when the env's estimator is ``"monte_carlo"``
+  ``StraightLane`` for curvature 0), each object's constant-input course another, the ego and the
+  objects are highway-env vehicles, and on top: the collision discs, each object's truncation boxes
+  and means over the horizon, their Monte Carlo draws when the env's estimator is ``"monte_carlo"``
   (from the renderer's own seeded generator, so rendering never changes the env's random stream),
   the plan set by ``env.set_plan``, the goal and a status text. Same view as the basic renderer,
   y up (highway-env draws y down: the scene is drawn in highway-env's way and flipped).
@@ -163,12 +163,13 @@ class HighwayRenderer(Renderer):
         self._ego = Vehicle(
             self._road, [scenario.ego.start.x, scenario.ego.start.y], scenario.ego.start.theta
         )
-        obj = scenario.object.start
-        self._object = Vehicle(self._road, [obj.x, obj.y], obj.theta, scenario.object.speed)
-        self._road.vehicles = [self._object, self._ego]
+        self._objects = [
+            Vehicle(self._road, [o.start.x, o.start.y], o.start.theta, o.speed) for o in scenario.objects
+        ]
+        self._road.vehicles = [*self._objects, self._ego]
 
     def _network(self) -> RoadNetwork:
-        """The reference arc (to the goal, then striped beyond it) and the object's course."""
+        """The reference arc (to the goal, then striped beyond it) and each object's course."""
         s = self.scenario
         path, net = s.path, RoadNetwork()
         x, y, theta = (float(c) for c in point(path, path.lambda_start))
@@ -176,20 +177,19 @@ class HighwayRenderer(Renderer):
         gx, gy, gt = (float(c) for c in point(path, path.lambda_goal))
         striped = (LineType.STRIPED, LineType.STRIPED)
         net.add_lane("goal", "beyond", arc_lane(gx, gy, gt, path.curvature, BEYOND_GOAL, striped))
-        o = s.object
-        speed = max(abs(o.speed), 1e-6)
-        length = speed * s.max_steps * s.dt
-        curvature = o.turn_rate / speed if abs(o.turn_rate / speed) * length < math.pi else 0.0
-        net.add_lane(
-            "object", "crossed", arc_lane(o.start.x, o.start.y, o.start.theta, curvature, length, striped)
-        )
+        for i, o in enumerate(s.objects):
+            speed = max(abs(o.speed), 1e-6)
+            length = speed * s.max_steps * s.dt
+            curvature = o.turn_rate / speed if abs(o.turn_rate / speed) * length < math.pi else 0.0
+            lane = arc_lane(o.start.x, o.start.y, o.start.theta, curvature, length, striped)
+            net.add_lane(f"object {i}", f"crossed {i}", lane)
         return net
 
     def render(
         self,
         ego_pose: np.ndarray,
         ego_speed: float,
-        object_measurement: np.ndarray,
+        object_measurements: np.ndarray,
         plan: np.ndarray | None = None,
         status: Sequence[str] = (),
     ) -> np.ndarray | None:
@@ -199,28 +199,30 @@ class HighwayRenderer(Renderer):
         gx, gy, _ = point(s.path, s.path.lambda_goal)
         pygame.draw.circle(world, GOAL, world.vec2pix((float(gx), float(gy))), 5)
 
-        measurement = np.asarray(object_measurement, dtype=float)
-        beliefs = predict(s, measurement)[1:]
-        draw_beliefs(world, beliefs)
+        measurements = np.atleast_2d(np.asarray(object_measurements, dtype=float))
+        shown = list(zip(measurements, s.objects, s.uncertainties, strict=False))
+        for measurement, _, u in shown:
+            draw_beliefs(world, predict(s, measurement, uncertainty=u)[1:])
         if plan is not None and len(plan) > 0:
             draw_polyline(world, np.asarray(plan)[:, :2], PLAN)
 
         x, y, th = (float(c) for c in ego_pose[:3])
-        ox, oy, oth, ov = (float(c) for c in measurement[:4])
-        crashed = math.hypot(x - ox, y - oy) <= s.collision_distance
-        for vehicle, (vx, vy, vth, vv), colour in (
-            (self._object, (ox, oy, oth, ov), OBJECT),
-            (self._ego, (x, y, th, ego_speed), EGO),
-        ):
-            vehicle.position = np.array([vx, vy])
-            vehicle.heading, vehicle.speed = vth, vv
-            vehicle.color = CRASHED if crashed else colour
+        crashed = [math.hypot(x - m[0], y - m[1]) <= s.ego.radius + o.radius for m, o, _ in shown]
+        for vehicle, (ox, oy, oth, ov, _), hit in zip(self._objects, measurements, crashed, strict=False):
+            vehicle.position = np.array([ox, oy])
+            vehicle.heading, vehicle.speed = oth, ov
+            vehicle.color = CRASHED if hit else OBJECT
+        self._ego.position, self._ego.heading, self._ego.speed = np.array([x, y]), th, ego_speed
+        self._ego.color = CRASHED if any(crashed) else EGO
+        self._road.vehicles = [*self._objects[: len(shown)], self._ego]  # absent objects not drawn
         RoadGraphics.display_traffic(self._road, world, offscreen=True)
-        draw_disc(world, ox, oy, s.object.radius, DISC)
+        for measurement, obj, _ in shown:
+            draw_disc(world, float(measurement[0]), float(measurement[1]), obj.radius, DISC)
         draw_disc(world, x, y, s.ego.radius, DISC)
-        if self.estimator == "monte_carlo":  # over the vehicles: where the object may be
-            draws = predict_array(s, measurement).sample(self._rng, s.mc_samples)[:, 1:]  # (J, N, 3)
-            draw_samples(world, draws)
+        if self.estimator == "monte_carlo":  # over the vehicles: where the objects may be
+            for measurement, _, u in shown:
+                one = predict_array(s, measurement, uncertainty=u)
+                draw_samples(world, one.sample(self._rng, s.mc_samples)[:, 1:])  # (J, N, 3)
 
         self._surface.blit(pygame.transform.flip(world, False, True), (0, 0))  # y up
         draw_text(self._surface, status, self._font)
