@@ -325,12 +325,12 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
     """What of the scenario is built into a solver: all but the parameters (epsilon, v_ref, the
-    uncertainty) and what the NLP never sees (the starts and the object's inputs, measured at each
+    uncertainty) and what the NLP never sees (the starts and the objects' inputs, measured at each
     step; the episode's step limit)."""
-    ego = dataclasses.replace(scenario.ego, start=PARKED, v_ref=0.0, initial_input=(0.0, 0.0))
-    obj = dataclasses.replace(scenario.object, start=PARKED, speed=0.0, turn_rate=0.0)
-    skip = ("risk_tolerance", "uncertainty", "max_steps", "ego", "object")
-    kept = tuple(
-        (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
-    )
-    return (("ego", ego), ("object", obj), *kept)
+    rest = max(scenario.ego.v_min, 0.0)  # a valid v_ref and input for every ego
+    ego = dataclasses.replace(scenario.ego, start=PARKED, v_ref=rest, initial_input=(rest, 0.0))
+    objects = tuple(dataclasses.replace(o, start=PARKED, speed=0.0, turn_rate=0.0) for o in scenario.objects)
+    skip = ("risk_tolerance", "uncertainty", "max_steps", "ego", "objects")
+    fields = dataclasses.fields(scenario)
+    kept = tuple((f.name, getattr(scenario, f.name)) for f in fields if f.name not in skip)
+    return (("ego", ego), ("objects", objects), *kept)

@@ -596,11 +596,19 @@ def test_uncertainty_levels_and_tolerances_share_one_solver():
 
 
 def test_agents_with_other_starts_and_reference_speeds_share_one_solver():
-    """v_ref is a parameter and the starts are measured: one build serves them all, and each agent
-    plans toward its own reference speed."""
+    """v_ref is a parameter and the starts and the object's inputs are measured: one build serves
+    them all, and each agent plans toward its own reference speed."""
     base = Scenario.preset("low", max_steps=30, object_start=(60.0, -80.0, np.pi / 2))
     first = RMPC(base.replace(v_ref=2.0))
-    other = RMPC(base.replace(v_ref=7.0, ego_start=(-20.0, 14.0, -0.2), initial_input=(1.0, 0.0)))
+    other = RMPC(
+        base.replace(
+            v_ref=7.0,
+            ego_start=(-20.0, 14.0, -0.2),
+            initial_input=(1.0, 0.0),
+            object_start=(55.0, -75.0, 1.0),
+            object_speed=2.0,
+        )
+    )
     assert other.build_time == 0.0  # the first one's solvers
     for agent in (first, other):
         env = gym.make("RiskCrossing-v0", scenario=agent.scenario)
