@@ -27,6 +27,8 @@ if TYPE_CHECKING:
 
 SOFT_SHARE = 0.3
 """Most of the cap the hard problem's calls leave to the soft problem."""
+OPTIONAL_SHARE = 0.1
+"""Share of the cap kept free by the soft level's further starts once one plan converged."""
 SOFT_ITERATIONS = 30
 """Iterations a soft solve is given time for, before the hard problem's calls."""
 FEASIBLE_SLACK = 1e-4
@@ -155,7 +157,11 @@ class Step:
             return violation(out) <= FEASIBLE_SLACK
 
         points = self.guesses(soft, extra=True, cold=not elastic)
-        out, _ = self.solve(soft, points, self.agent._manoeuvre_time, keep_best=True, enough=feasible)
+        # once a plan is in hand the other starts are optional: they keep a margin of the cap
+        reserve = self.agent._manoeuvre_time
+        cap = self.agent.max_solve_time
+        optional = reserve + (OPTIONAL_SHARE * cap if math.isfinite(cap) else 0.0)
+        out, _ = self.solve(soft, points, reserve, keep_best=True, reserve_after=optional, enough=feasible)
         return (None, 0.0) if out is None else (out, violation(out))
 
     def manoeuvre(self) -> tuple[str, np.ndarray]:
