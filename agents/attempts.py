@@ -33,6 +33,8 @@ class Tally:
     """Iterations, summed over the calls."""
     failed_calls: int = 0
     """Calls that did not converge."""
+    overran_calls: int = 0
+    """Calls that ran more iterations than their rung allows (the solver ignored its limit)."""
     solver_time: float = 0.0
     """Wall time inside the calls [s]."""
     status: str = "not solved"
@@ -88,6 +90,7 @@ def solve(
         elif best is None:
             tally.status, tally.timings = status, timings
         tally.failed_calls += not ok
+        tally.overran_calls += iterations > problem.limits[rung][0] + 1  # fatrop counts one more
         # the budget cut this call short: it stopped at a smaller rung's iteration or time limit
         stopped = iterations >= problem.limits[rung][0] or status in TIME_LIMITED
         budget.capped |= not ok and rung > 0 and stopped

@@ -87,6 +87,9 @@ class SolveReport:
     cpu_time: float = 0.0
     """CPU time of the process during the step [s]: the step's own work, which :attr:`solve_time`
     exceeds when other processes took the CPU."""
+    overran_calls: int = 0
+    """Solver calls that ran past their rung's iteration limit (fatrop may ignore ``max_iter``, see
+    :mod:`agents.budget`): the calls the time cap could not bound."""
     capped: bool = False
     """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
     rung's iteration or time limit) or left no time for one."""

@@ -3,8 +3,11 @@ of the solver rung (:meth:`agents.solver.SolverSettings.rung_limits`) that fits 
 
 IPOPT stops itself at its ``max_wall_time``; fatrop (CasADi 3.8) has no time limit, only
 ``max_iter``, so its calls are predicted from the measured time per iteration of the same NLP.
-That ``max_iter`` bounds fatrop's main loop, not its restoration phase: a call that enters it may
-overrun (rare: about one call in 8,000 of the exact SMPC in the stress benchmark).
+That ``max_iter`` does not bound every call: fatrop 1.1.8 sometimes runs on past it. In the stress
+benchmark such calls ran 31 and 1,001 iterations at a limit of 4, their iteration logs starting at
+fatrop's default barrier parameter 0.1 rather than the ``mu_init`` set, the longer one ending at
+fatrop's default limit of 1,000; ``iteration_callback`` is ignored by the plugin, so nothing can stop
+such a call. :attr:`agents.SolveReport.overran_calls` counts them; ``benchmarks.stress`` reports them.
 """
 
 from __future__ import annotations

@@ -282,5 +282,6 @@ class Step:
             violation=violation,
             manoeuvre=name,
             failed_calls=tally.failed_calls,
+            overran_calls=tally.overran_calls,
             capped=self.budget.capped,
         )

@@ -62,6 +62,8 @@ EPISODE_COLUMNS = (
     "penalty_steps",
     "infeasible_steps",
     "failed_calls",
+    "overran_calls",
+    "over_cap_steps",
     "capped_steps",
     "solve_ms_p50",
     "solve_ms_max",
@@ -79,6 +81,9 @@ SUMMARY_COLUMNS = (
     "penalty_steps",
     "infeasible_pct",
     "failed_calls",
+    "overran_calls",
+    "over_cap_steps",
+    "feasible_fallback_pct",
     "capped_steps",
     "solve_ms_p50",
     "solve_ms_p95",
@@ -138,6 +143,8 @@ def run_job(job: Job) -> dict[str, Any]:
         "penalty_steps": int(sum(r.fallback is None and r.variant.endswith("_soft") for r in reports)),
         "infeasible_steps": infeasible_steps(scene, record, epsilon, agent) if epsilon == 0.0 else "",
         "failed_calls": int(sum(getattr(r, "failed_calls", int(r.failed)) for r in reports)),
+        "overran_calls": int(sum(getattr(r, "overran_calls", 0) for r in reports)),
+        "over_cap_steps": int(np.sum(record.solve_time > agent.max_solve_time)),
         "capped_steps": int(sum(bool(getattr(r, "capped", False)) for r in reports)),
         "solve_ms_p50": round(float(np.median(ms)), 3),
         "solve_ms_max": round(float(ms.max()), 3),
@@ -183,6 +190,13 @@ def summarise(agent: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         if all(r["infeasible_steps"] != "" for r in rows)
         else "",
         "failed_calls": sum(r["failed_calls"] for r in rows),
+        "overran_calls": sum(r["overran_calls"] for r in rows),
+        "over_cap_steps": sum(r["over_cap_steps"] for r in rows),
+        "feasible_fallback_pct": round(
+            100.0 * (soft + manoeuvre - sum(r["infeasible_steps"] for r in rows)) / steps, 3
+        )
+        if all(r["infeasible_steps"] != "" for r in rows)
+        else "",
         "capped_steps": sum(r["capped_steps"] for r in rows),
         "solve_ms_p50": round(float(np.percentile(ms, 50)), 2),
         "solve_ms_p95": round(float(np.percentile(ms, 95)), 2),
@@ -211,16 +225,20 @@ def markdown(
         "fallback). Failed calls: solver calls that did not converge (every attempt of a step).",
         "Infeasible: fallback steps certified infeasible (no input sequence within the rate limits",
         "clears the truncation box at some step n; for epsilon = 0, whose row is the box clearance), a",
-        "share of all steps: a fallback must act there. Capped: steps where the time cap cut a call",
+        "share of all steps: a fallback must act there; not certified: the fallback steps not",
+        "certified infeasible (the certificate is sufficient only, so an upper bound on the fallbacks",
+        "where a plan may have existed). Overran: solver calls that ran past their iteration limit",
+        "(fatrop ignores it at times; see `agents/budget.py`); > cap: steps longer than the cap",
+        "`max_solve_time`. Capped: steps where the time cap cut a call",
         "short or left no time for one. Step time: the whole `predict` call [ms] (wall time; CPU max: the",
         "process's CPU time in the step, its own work, which the wall time exceeds when other processes",
         "ran).",
         "Violation: median over the soft steps of max_n s_n [m of clearance for these agents].",
         "",
         "| agent | method | eps [J] | scenes | steps | collisions (avoidable / unavoidable) |"
-        " fallback % (soft / manoeuvre) | infeasible % | penalty | failed calls | capped |"
-        " p50 | p95 | p99 | max [ms] | CPU max [ms] | violation |",
-        "|" + " --- |" * 17,
+        " fallback % (soft / manoeuvre) | infeasible % | not certified % | penalty | failed calls |"
+        " overran | capped | > cap | p50 | p95 | p99 | max [ms] | CPU max [ms] | violation |",
+        "|" + " --- |" * 20,
     ]
     lines.insert(-2, "<!-- --8<-- [start:summary] -->")
     for s in summary:
@@ -230,7 +248,9 @@ def markdown(
             f"{s['collisions']} ({s['avoidable']} / {s['unavoidable']}) | "
             f"{s['fallback_pct']:.2f} ({s['soft_pct']:.2f} / {s['manoeuvre_pct']:.2f}) | "
             f"{'-' if s['infeasible_pct'] == '' else format(s['infeasible_pct'], '.2f')} | "
-            f"{s['penalty_steps']} | {s['failed_calls']} | {s['capped_steps']} | {s['solve_ms_p50']:.1f} | "
+            f"{'-' if s['feasible_fallback_pct'] == '' else format(s['feasible_fallback_pct'], '.2f')} | "
+            f"{s['penalty_steps']} | {s['failed_calls']} | {s['overran_calls']} | {s['capped_steps']} | "
+            f"{s['over_cap_steps']} | {s['solve_ms_p50']:.1f} | "
             f"{s['solve_ms_p95']:.1f} | {s['solve_ms_p99']:.1f} | {s['solve_ms_max']:.1f} | "
             f"{s['cpu_ms_max']:.1f} | {s['soft_violation_median']:.2f} |"
         )

@@ -418,6 +418,27 @@ def test_rungs_hold_the_solvers_own_limits() -> None:
         SolverSettings(rungs=0)
 
 
+def test_calls_past_their_iteration_limit_are_counted() -> None:
+    """fatrop may run past max_iter (agents/budget.py): such calls are tallied, the others not."""
+    from types import SimpleNamespace
+
+    from agents import attempts
+
+    limits = SolverSettings(max_iter=8, rungs=2, time_limit=1.0).rung_limits()
+    problem = SimpleNamespace(limits=limits, times=CallTimes(limits, prior=1e-4, failing=1e-4))
+    runs = iter([(4, False), (9, False), (31, True)])  # 9 = the limit 8 plus fatrop's count of one more
+
+    def call(pr, args, rung):
+        iterations, ok = next(runs)
+        return {"f": np.zeros(1)}, "status", ok, iterations, {}
+
+    tally = attempts.Tally()
+    guesses = [(np.zeros(2), None, None)] * 3
+    out, calls = attempts.solve(call, problem, guesses, {}, Budget(1.0), 0.0, tally)
+    assert out is not None and calls == 3
+    assert tally.failed_calls == 2 and tally.overran_calls == 1 and tally.iterations == 44
+
+
 # ----------------------------------------------------------------------------- API
 def test_predictor_protocol_batches_and_episode_start() -> None:
     env = gym.make("RiskCrossing-v0", uncertainty="low")
