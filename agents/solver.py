@@ -309,7 +309,9 @@ def build_problem(
     index = {tag: i for i, tag in enumerate(w_tags)}
     x_index = np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)])
     u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
-    prior, failing = iteration_times(smallest, scenario, x_index, u_index, lbg, ubg, risk_shape)
+    slack_index = np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int)
+    layout = (x_index, u_index, lbg, ubg, risk_shape, slack_index)
+    prior, failing = iteration_times(smallest, scenario, *layout)
     cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
     rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
     solvers = [make(r) for r in rungs] + [smallest]
@@ -327,7 +329,7 @@ def build_problem(
         x_index=x_index,
         u_index=u_index,
         risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
-        slack_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int),
+        slack_index=slack_index,
         slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
         w_tags=tuple(w_tags),
         shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
@@ -348,11 +350,17 @@ def iteration_time(
     lbg: list[float],
     ubg: list[float],
     risk_shape: tuple[int, int],
+    slack_index: np.ndarray,
     repeats: int = 2,
 ) -> float:
     """The time of one solver iteration [s] on the scenario's start (its object, epsilon and
     uncertainty; zero risk data) from rest: the fastest of ``repeats`` calls (the first also pays
-    one-time set-up)."""
+    one-time set-up).
+
+    The bounds have the steps' pattern (which entries are fixed, which infinite; the slacks >= 0):
+    CasADi 3.8's fatrop splits the bounds into equalities and inequalities at every call, and once a
+    solver was called with another split, its later calls ignore ``max_iter`` and run on with
+    fatrop's default options."""
     N, n_w = scenario.horizon, solver.size_in("x0")[0]
     x, y, theta = scenario.ego.start.as_tuple()
     x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
@@ -365,7 +373,7 @@ def iteration_time(
         ]
     )
     p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
-    lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0)
+    lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0, slack_index)
     w0 = np.zeros(n_w)
     w0[x_index] = x0
     best = math.inf

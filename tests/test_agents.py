@@ -260,8 +260,10 @@ def test_soft_problem_is_an_exact_penalty_where_the_hard_one_is_feasible(make, e
             slacks = out["x"][soft.slack_index]
             assert np.all(np.abs(slacks) <= 1e-6), slacks
             # to the solver's tolerance (tol = 1e-4, scaled by the multipliers rho_n of the slacks'
-            # bounds), on a problem flat in some inputs
-            np.testing.assert_allclose(out["x"][soft.u_index][0, :2], report.inputs[0], atol=1e-2)
+            # bounds), on a problem flat in some inputs: both solves stop at tol, so the first
+            # input may differ along a flat direction (up to 0.11 m/s at one step) while the
+            # objectives agree (below)
+            np.testing.assert_allclose(out["x"][soft.u_index][0, :2], report.inputs[0], atol=0.15)
             w = np.zeros(hard.n_w)  # the soft plan in the hard problem's layout: its objective
             w[hard.x_index], w[hard.u_index] = out["x"][soft.x_index], out["x"][soft.u_index]
             assert float(hard.evaluate(w, step.p)[0]) == pytest.approx(report.cost, rel=1e-3)
