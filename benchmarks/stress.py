@@ -269,7 +269,7 @@ def markdown(
             lines.append(
                 f"| {r['agent']} | {r['scene']} | {r['uncertainty']} | {r['kind']} | {r['motion']} | "
                 f"{r['v_ref']:g} | {r['steps']} | {'yes' if r['avoidable'] else 'no'} | "
-                f"{r['witness_clearance']:.2f} | {r['fallback_soft']} / {r['fallback_manoeuvre']} |"
+                f"{r['witness_clearance']:.3f} | {r['fallback_soft']} / {r['fallback_manoeuvre']} |"
             )
     lines += ["", f"Wall time: {wall:.0f} s."]
     return "\n".join(lines) + "\n"
