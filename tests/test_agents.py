@@ -420,6 +420,28 @@ def test_rungs_hold_the_solvers_own_limits() -> None:
         SolverSettings(rungs=0)
 
 
+@pytest.mark.parametrize("make", [RMPC, SMPC], ids=["rmpc", "smpc-exact"])
+def test_every_rung_keeps_its_iteration_limit_after_the_build(make) -> None:
+    """CasADi 3.8's fatrop runs every call with its defaults once a solver was called with another
+    split of the bounds into equalities and inequalities: the build's timing calls must use the
+    steps' pattern (they once left the soft problems' slacks unbounded, so the smallest soft rung
+    ran hundreds of iterations at a limit of 4)."""
+    from agents.ocp import soft_variant
+    from agents.step import Step
+
+    env = gym.make("RiskCrossing-v0", uncertainty="high", max_steps=5)
+    agent = make.from_env(env, max_solve_time=0.1)
+    obs, _ = env.reset(seed=0)
+    agent.predict(obs)
+    step = Step(agent, 0, obs, Budget(math.inf))
+    for variant in (step.variant, soft_variant(step.variant)):
+        pr = agent._problem(variant)
+        args = step.args(pr)
+        for rung, solver in enumerate(pr.solvers):
+            solver(**args, x0=np.zeros(pr.n_w))  # a poor start: every rung runs to its limit
+            assert int(solver.stats()["iter_count"]) <= pr.limits[rung][0] + 1, (variant, rung)
+
+
 def test_calls_past_their_iteration_limit_are_counted() -> None:
     """fatrop may run past max_iter (agents/budget.py): such calls are tallied, the others not."""
     from types import SimpleNamespace
