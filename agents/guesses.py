@@ -87,9 +87,15 @@ def initial_point(
     cost, g = problem.evaluate(w, p)
     cost, g = float(cost), np.asarray(g).ravel()
     if problem.slack_index.size:  # the objective is linear in the slacks: sum_n rho_n s_n
+        # a stage's slack is shared by its rows (one per object slot): the largest shortfall
         shortfall = np.maximum(lbg[problem.risk_rows] - g[problem.risk_rows], 0.0)
-        w[problem.slack_index] = shortfall + SLACK_PUSH
-        g[problem.risk_rows] += shortfall + SLACK_PUSH
+        row_stage = np.array([problem.g_tags[i][0] for i in problem.risk_rows])
+        slack_stage = np.array([problem.w_tags[i][0] for i in problem.slack_index])
+        per_stage = np.zeros(len(slack_stage))
+        where = np.searchsorted(slack_stage, row_stage)
+        np.maximum.at(per_stage, where, shortfall)
+        w[problem.slack_index] = per_stage + SLACK_PUSH
+        g[problem.risk_rows] += per_stage[where] + SLACK_PUSH
         cost += float(problem.slack_costs @ w[problem.slack_index])
     violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
     return w, violation, cost

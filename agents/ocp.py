@@ -25,10 +25,19 @@ The sections of :func:`assemble`, in order:
   the agent's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, the
-  numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box, speed
-  bounds) and the agent's risk data (Monte Carlo draws). Agents that differ only in their
-  tolerance or uncertainty level share one built (or compiled) solver.
+- **Parameters** (nlpsol ``p``, :func:`parameter_vector`): epsilon, then per object slot
+  k = 0..K-1 (:data:`SLOT_SIZE` numbers): its measurement (c1, c2, theta, v, omega), ``active``
+  (1: the object is present and may reach the ego within the horizon, 0: its rows cost nothing),
+  its collision distance r_e + r_o [m], its mass m_o [kg] (for the severity) and the numbers of
+  its :class:`~risk_env.scenario.Uncertainty` (:func:`uncertainty_vector`); last the agent's risk
+  data per stage (Monte Carlo draws, every slot's). Agents that differ only in their tolerance,
+  uncertainty level or objects share one built (or compiled) solver, and a solver with K slots
+  serves every scene with up to K objects without a rebuild.
+- **Risk rows of many objects** (:data:`Margin`): the agent's margin returns the rows of one stage
+  for all K slots: the RMPC one row per slot (``margin_k + BIG (1 - active_k)``: an inactive slot's
+  row holds by :data:`INACTIVE` margin units, whatever its numbers), the SMPC one row per stage on
+  the sum of the slots' risks, ``sum_k active_k R_k <= epsilon``. With one slot, active, both are
+  the single-object rows bit for bit (``+ 0.0`` and ``1.0 *`` are exact).
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
@@ -74,8 +83,14 @@ NX = 6
 NU = 3
 """Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
 
-Margin = Callable[[ca.SX, Belief, ca.SX, ca.SX, bool], ca.SX]
-"""``(ego (4,), belief, epsilon, risk data, zero) -> margin``: >= 0 iff the step's risk bound holds."""
+SLOT_SIZE = 5 + 3 + 13
+"""Parameters per object slot: measurement (5), active, collision distance [m], mass [kg],
+uncertainty numbers (13)."""
+INACTIVE = 1e3
+"""Margin units added to an inactive slot's rows (so they hold, whatever the slot's numbers)."""
+Margin = Callable[[ca.SX, list[Belief], ca.SX, ca.SX, ca.SX, bool], ca.SX]
+"""``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
+collision distance [m], mass [kg], zero) -> rows``: every row >= 0 iff the step's risk bound holds."""
 Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
 """``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
 
@@ -95,12 +110,17 @@ def soft_variant(variant: str) -> str:
     return form + SOFT
 
 
+def data_shape(risk_shape: tuple[int, int], slots: int) -> tuple[int, int]:
+    """Shape of one stage's risk data parameter: every slot's ``risk_shape`` rows stacked."""
+    return (risk_shape[0] * slots, risk_shape[1]) if risk_shape[0] else (0, 0)
+
+
 def stage_functions(
-    scenario: Scenario, variant: str, margin: Margin, risk_shape: tuple[int, int]
+    scenario: Scenario, variant: str, margin: Margin, risk_shape: tuple[int, int], slots: int = 1
 ) -> dict[str, ca.Function | None]:
     """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, and ``risk`` (ego, belief, epsilon, data) -> margin
-    (None for ``"free"``)."""
+    ``pose_cost`` x -> the pose part of e' W e, and ``risk`` (ego, beliefs (K, 11), epsilon, data,
+    slot numbers (K, 3)) -> rows (None for ``"free"``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
     w_c1, w_c2, w_th, _ = sc.cost_weights
@@ -113,12 +133,18 @@ def stage_functions(
     risk = None
     form = risk_form(variant)
     if form != "free":
-        ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
-        eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *risk_shape)
-        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, form == "zero")
+        ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", slots * Belief.SIZE)
+        eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *data_shape(risk_shape, slots))
+        slot_s = ca.SX.sym("slots", slots, 3)
+        size = Belief.SIZE
+        beliefs = [Belief.from_array(belief_s[k * size : (k + 1) * size]) for k in range(slots)]
+        rows = margin(ego_s, beliefs, eps_s, data_s, slot_s, form == "zero")
         # only the ego state is a variable: no derivatives for the rest (compiled code: less)
         risk = ca.Function(
-            "risk", [ego_s, belief_s, eps_s, data_s], [row], {"is_diff_in": [True, False, False, False]}
+            "risk",
+            [ego_s, belief_s, eps_s, data_s, slot_s],
+            [rows],
+            {"is_diff_in": [True, False, False, False, False]},
         )
     return {"f": f, "pose_cost": pose_cost, "risk": risk}
 
@@ -130,28 +156,37 @@ def assemble(
     risk_shape: tuple[int, int],
     stage_cost: str,
     soft_penalty: float | None = None,
+    slots: int = 1,
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
-    called), its :data:`Layout` and the beliefs' function (object measurement (5,), uncertainty
-    numbers) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho: soften the risk rows with slacks
-    (tagged ``(n, "s", 0)``) at cost ``rho * s_n`` (a soft variant)."""
+    called) for ``slots`` object slots, its :data:`Layout` and one object's beliefs' function
+    (measurement (5,), uncertainty numbers (13,)) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho:
+    soften the risk rows with slacks (one per stage, tagged ``(n, "s", 0)``, shared by the stage's
+    rows) at cost ``rho * s_n`` (a soft variant)."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
     dv, dw = ego.accel_max * sc.dt, ego.omega_rate_max * sc.dt
     f, pose_cost, risk = stages["f"], stages["pose_cost"], stages["risk"]
 
-    # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
-    # share one solver), per-step risk data; the object's beliefs
-    p_obj = sym.sym("object", 5)
+    # --- parameters (parameter_vector's layout): epsilon; per slot its measurement, active flag,
+    # collision distance, mass and uncertainty numbers; per-step risk data; the slots' beliefs
+    n_unc = len(_UNCERTAINTY_ORDER)
     p_eps = sym.sym("epsilon")
-    p_unc = sym.sym("uncertainty", len(uncertainty_vector(sc)))
-    p_data = [sym.sym(f"risk_data_{n}", *risk_shape) for n in range(1, N + 1)]
-    p = ca.vertcat(p_obj, p_eps, p_unc, *(ca.vec(d) for d in p_data))
-    beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(p_unc))
+    p_slots = [sym.sym(f"slot_{k}", SLOT_SIZE) for k in range(slots)]
+    p_data = [sym.sym(f"risk_data_{n}", *data_shape(risk_shape, slots)) for n in range(1, N + 1)]
+    p = ca.vertcat(p_eps, *p_slots, *(ca.vec(d) for d in p_data))
+    slot_numbers = ca.horzcat(*(q[5:8] for q in p_slots)).T  # (K, 3): active, distance, mass
     fields = [f.name for f in dataclasses.fields(Belief)]
-    stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
-    belief_fn = ca.Function("beliefs", [p_obj, p_unc], [ca.horzcat(*stacked).T])
+
+    def stack(measurement: Any, numbers: Any) -> list[Any]:
+        bs = predict(sc, measurement, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(numbers))
+        return [ca.vertcat(*(getattr(b, k) for k in fields)) for b in bs]
+
+    per_slot = [stack(q[0:5], q[8 : 8 + n_unc]) for q in p_slots]
+    stacked = [ca.vertcat(*(b[n] for b in per_slot)) for n in range(N + 1)]
+    q_obj, q_unc = sym.sym("object", 5), sym.sym("uncertainty", n_unc)
+    belief_fn = ca.Function("beliefs", [q_obj, q_unc], [ca.horzcat(*stack(q_obj, q_unc)).T])
 
     # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
     X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
@@ -177,7 +212,7 @@ def assemble(
         if risk is None:
             return 0.0
         ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-        row = risk(ego_n, stacked[n], p_eps, p_data[n - 1])
+        row = risk(ego_n, stacked[n], p_eps, p_data[n - 1], slot_numbers)
         if not soft:
             add_g(row, 0.0, math.inf, n, "risk")
             return 0.0
@@ -241,10 +276,43 @@ _UNCERTAINTY_FIELDS = (
 )
 
 
-def uncertainty_vector(scenario: Scenario) -> np.ndarray:
-    """The scenario's :class:`~risk_env.scenario.Uncertainty` as the solver's parameter vector (13,)."""
-    u = scenario.uncertainty
+_UNCERTAINTY_ORDER = tuple(f"{name}[{i}]" for name, length in _UNCERTAINTY_FIELDS for i in range(length))
+
+
+def uncertainty_vector(scenario: Scenario, index: int = 0) -> np.ndarray:
+    """Object ``index``'s :class:`~risk_env.scenario.Uncertainty` (the first object's by default)
+    as the solver's parameter vector (13,)."""
+    u = scenario.uncertainties[index]
     return np.concatenate([np.asarray(getattr(u, name), float) for name, _ in _UNCERTAINTY_FIELDS])
+
+
+def slot_numbers(scenario: Scenario, slots: int) -> np.ndarray:
+    """The fixed numbers of each slot ``(K, 2 + 13)``: collision distance r_e + r_o [m], mass m_o
+    [kg] and uncertainty numbers; slot k takes object k's, the slots beyond the scenario's
+    objects the last object's."""
+    out = []
+    for k in range(slots):
+        i = min(k, len(scenario.objects) - 1)
+        obj = scenario.objects[i]
+        out.append([scenario.collision_distances[i], obj.mass, *uncertainty_vector(scenario, i)])
+    return np.array(out, dtype=float)
+
+
+def parameter_vector(
+    epsilon: float,
+    measurements: np.ndarray,
+    active: np.ndarray,
+    numbers: np.ndarray,
+    data: np.ndarray,
+) -> np.ndarray:
+    """The solver's ``p``: epsilon, per slot k its measurement ``measurements[k]`` (5,), its
+    ``active[k]`` flag, its ``numbers[k]`` (:func:`slot_numbers`), then the per-stage risk data
+    ``(N, K J, 3)`` (each stage's matrix column by column)."""
+    blocks = [
+        np.concatenate([m, [float(a)], n[:2], n[2:]])
+        for m, a, n in zip(measurements, active, numbers, strict=True)
+    ]
+    return np.concatenate([[epsilon], *blocks, *(d.ravel(order="F") for d in data)])
 
 
 def symbolic_uncertainty(p: Any) -> SimpleNamespace:
@@ -258,8 +326,9 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
 
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
-    """What of the scenario is built into a solver: all but epsilon and the uncertainty."""
-    skip = ("risk_tolerance", "uncertainty")
+    """What of the scenario is built into a solver: all but epsilon, the uncertainty and the
+    objects (each slot's numbers are parameters)."""
+    skip = ("risk_tolerance", "uncertainty", "objects")
     return tuple(
         (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
     )

@@ -50,8 +50,9 @@ from agents.ocp import (
     STAGE_COSTS,
     Margin,
     assemble,
+    parameter_vector,
+    slot_numbers,
     stage_functions,
-    uncertainty_vector,
     variable_bounds,
 )
 from risk_env.path import project
@@ -248,17 +249,22 @@ def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Proble
 
 
 def build_problem(
-    scenario: Scenario, variant: str, settings: SolverSettings, margin: Margin, risk_shape: tuple[int, int]
+    scenario: Scenario,
+    variant: str,
+    settings: SolverSettings,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    slots: int = 1,
 ) -> Problem:
-    """Build the NLP of :mod:`agents.ocp` for ``variant`` and its solver (compiled with
-    ``settings.jit`` where a C compiler works)."""
+    """Build the NLP of :mod:`agents.ocp` for ``variant`` with ``slots`` object slots and its
+    solver (compiled with ``settings.jit`` where a C compiler works)."""
     t0 = time.perf_counter()
     N = scenario.horizon
-    stages = stage_functions(scenario, variant, margin, risk_shape)
+    stages = stage_functions(scenario, variant, margin, risk_shape, slots)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
     penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, slots
     )
 
     base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
@@ -272,7 +278,7 @@ def build_problem(
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
         # code holds the risk row and its derivatives once instead of N times; every rung loads
         # the one library, whose compiled "nlp" leaves nothing to expand
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty)
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, slots)
         base["expand"] = False
         library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
         jit = library is not None
@@ -297,7 +303,7 @@ def build_problem(
     index = {tag: i for i, tag in enumerate(w_tags)}
     x_index = np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)])
     u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
-    prior, failing = iteration_times(smallest, scenario, x_index, u_index, lbg, ubg, risk_shape)
+    prior, failing = iteration_times(smallest, scenario, x_index, u_index, lbg, ubg, risk_shape, slots)
     cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
     rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
     solvers = [make(r) for r in rungs] + [smallest]
@@ -334,22 +340,23 @@ def iteration_time(
     lbg: list[float],
     ubg: list[float],
     risk_shape: tuple[int, int],
+    slots: int = 1,
     repeats: int = 2,
 ) -> float:
-    """The time of one solver iteration [s] on the scenario's start (its object, epsilon and
-    uncertainty; zero risk data) from rest: the fastest of ``repeats`` calls (the first also pays
-    one-time set-up)."""
+    """The time of one solver iteration [s] on the scenario's start (its objects in the first
+    slots, all active, the rest absent; epsilon; zero risk data) from rest: the fastest of
+    ``repeats`` calls (the first also pays one-time set-up)."""
     N, n_w = scenario.horizon, solver.size_in("x0")[0]
     x, y, theta = scenario.ego.start.as_tuple()
     x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
-    obj = scenario.object
-    p = np.concatenate(
-        [
-            [*obj.start.as_tuple(), obj.speed, obj.turn_rate, scenario.risk_tolerance],
-            uncertainty_vector(scenario),
-            np.zeros(N * risk_shape[0] * risk_shape[1]),
-        ]
-    )
+    measurements = np.zeros((slots, 5))
+    active = np.zeros(slots)
+    for k, obj in enumerate(scenario.objects[:slots]):
+        measurements[k] = (*obj.start.as_tuple(), obj.speed, obj.turn_rate)
+        active[k] = 1.0
+    rows = risk_shape[0] * slots
+    data = np.zeros((N, rows, risk_shape[1] if rows else 0))
+    p = parameter_vector(scenario.risk_tolerance, measurements, active, slot_numbers(scenario, slots), data)
     lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0)
     w0 = np.zeros(n_w)
     w0[x_index] = x0
