@@ -51,11 +51,13 @@ def solve(
     tally: Tally,
     keep_best: bool = False,
     reserve_after: float | None = None,
+    enough: Callable[[dict[str, np.ndarray]], bool] | None = None,
 ) -> tuple[dict[str, np.ndarray] | None, int]:
-    """``(outputs of the best converged call or None, calls made)``: one call of ``problem`` per
-    guess (``args``: the nlpsol arguments but the initial point), while a rung fits the budget
-    left beyond ``reserve`` [s] (``reserve_after`` once a call converged: the later levels will
-    not run); stops at the first success unless ``keep_best``."""
+    """``(outputs of the converged call of least objective or None, calls made)``: one call of
+    ``problem`` per guess (``args``: the nlpsol arguments but the initial point), while a rung
+    fits the budget left beyond ``reserve`` [s] (``reserve_after`` once a call converged: the later
+    levels will not run); stops at the first success unless ``keep_best``, and then at the first
+    success that is ``enough``."""
     best: dict[str, np.ndarray] | None = None
     calls = 0
     points = iter(guesses)
@@ -89,7 +91,7 @@ def solve(
         # the budget cut this call short: it stopped at a smaller rung's iteration or time limit
         stopped = iterations >= problem.limits[rung][0] or status in TIME_LIMITED
         budget.capped |= not ok and rung > 0 and stopped
-        if ok and not keep_best:
+        if ok and (not keep_best or (enough is not None and enough(out))):
             break
         if ok and reserve_after is not None:
             reserve = reserve_after
@@ -129,6 +131,7 @@ def warm_guess(
         w0 = guesses.initial_point(problem, x0, shifted, p, lbg)[0]
     else:
         w0 = guesses.pack(problem, guesses.rollout(problem, x0, shifted), shifted)
+        w0 = guesses.fill_accumulators(problem, w0, p)
     if old is None or memory.get("lam_x") is None:
         return w0, None, None
     lam = []

@@ -84,6 +84,9 @@ class SolveReport:
     """``"manoeuvre"``: the name of the manoeuvre applied (e.g. ``"reverse_left"``)."""
     failed_calls: int = 0
     """Solver calls of this step that did not converge (every attempt, every level)."""
+    cpu_time: float = 0.0
+    """CPU time of the process during the step [s]: the step's own work, which :attr:`solve_time`
+    exceeds when other processes took the CPU."""
     capped: bool = False
     """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
     rung's iteration or time limit) or left no time for one."""

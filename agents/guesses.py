@@ -27,6 +27,18 @@ def pack(problem: Problem, states: np.ndarray, inputs: np.ndarray) -> np.ndarray
     return w
 
 
+def fill_accumulators(problem: Problem, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``w`` with the budget's accumulators c_n = R_1 + ... + R_{n-1} of its plan at parameters ``p``
+    (a no-op without a budget): with c = 0 the accumulator rows are -R_n."""
+    if not problem.acc_index.size:
+        return w
+    w = w.copy()
+    w[problem.acc_index] = 0.0
+    g = np.asarray(problem.evaluate(w, p)[1]).ravel()
+    w[problem.acc_index] = np.cumsum(-g[problem.acc_rows])
+    return w
+
+
 def ramp(start: float, target: float, rate: float, limit: tuple[float, float], steps: int) -> np.ndarray:
     """``steps`` values moving from ``start`` toward ``target`` by at most ``rate`` per step, within
     ``limit``."""
@@ -83,20 +95,17 @@ def initial_point(
     violation of w against ``lbg`` and the problem's ubg at parameters ``p``, and the objective (a
     soft variant: with the slacks' cost, so that guesses rank as the soft problem does, early
     violations first)."""
-    w = pack(problem, rollout(problem, x0, inputs), inputs)
+    w = fill_accumulators(problem, pack(problem, rollout(problem, x0, inputs), inputs), p)
     cost, g = problem.evaluate(w, p)
     cost, g = float(cost), np.asarray(g).ravel()
-    if problem.slack_index.size:  # the objective is linear in the slacks: sum_n rho_n s_n
-        # a stage's slack is shared by its rows (one per object slot): the largest shortfall
+    if problem.slack_index.size:  # the slacks where the rows fall short
+        # a slack may be shared by several rows (a stage's, one per object slot): their largest
         shortfall = np.maximum(lbg[problem.risk_rows] - g[problem.risk_rows], 0.0)
-        row_stage = np.array([problem.g_tags[i][0] for i in problem.risk_rows])
-        slack_stage = np.array([problem.w_tags[i][0] for i in problem.slack_index])
-        per_stage = np.zeros(len(slack_stage))
-        where = np.searchsorted(slack_stage, row_stage)
-        np.maximum.at(per_stage, where, shortfall)
-        w[problem.slack_index] = per_stage + SLACK_PUSH
-        g[problem.risk_rows] += per_stage[where] + SLACK_PUSH
-        cost += float(problem.slack_costs @ w[problem.slack_index])
+        per_slack = np.zeros(problem.slack_index.size)
+        np.maximum.at(per_slack, problem.row_slack, shortfall)
+        w[problem.slack_index] = per_slack + SLACK_PUSH
+        g[problem.risk_rows] += per_slack[problem.row_slack] + SLACK_PUSH
+        cost = float(problem.evaluate(w, p)[0])
     violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
     return w, violation, cost
 
@@ -108,11 +117,12 @@ def cold_guesses(
     p: np.ndarray,
     lbg: np.ndarray,
     extra: dict[str, np.ndarray] | None = None,
-) -> list[np.ndarray]:
+) -> list[tuple[np.ndarray, float]]:
     """The :func:`candidates` (and the ``extra`` input sequences ``(N, NU)``) as initial points w
-    (:func:`initial_point`), best first: smallest constraint violation, then cost."""
+    (:func:`initial_point`) with their constraint violations, best first: smallest violation, then
+    cost."""
     scored = []
     for inputs in [*candidates(scenario, x0).values(), *(extra or {}).values()]:
         w0, violation, cost = initial_point(problem, x0, inputs, p, lbg)
         scored.append((violation, cost, len(scored), w0))
-    return [w0 for *_, w0 in sorted(scored, key=lambda s: s[:3])]
+    return [(w0, violation) for violation, _, _, w0 in sorted(scored, key=lambda s: s[:3])]

@@ -20,6 +20,7 @@ The optimal control problem is in :mod:`agents.ocp`, its solver (options, compil
 from __future__ import annotations
 
 import functools
+import gc
 import math
 import os
 from typing import Any, ClassVar
@@ -83,9 +84,9 @@ class PathFollowingMPC:
         (``fallback=None``, ``retried=True``, ``variant="*_soft"``). Otherwise the soft plan, the
         least violation of the risk bound the solver found (so the most clearance it could keep),
         is applied: ``fallback="soft"`` with the ``violation``.
-        After a step that missed the risk bound (``"soft"`` or ``"manoeuvre"``) the next step
-        goes to the soft problem directly ("elastic mode", as in SNOPT): the hard problem is most
-        likely infeasible still, and where it is not, its exact penalty returns its solution.
+        After a step whose soft plan missed the risk bound the next step goes to the soft problem
+        directly, from the shifted plan only ("elastic mode", as in SNOPT): the hard problem is
+        most likely infeasible still, and where it is not, its exact penalty returns its solution.
     (c) if that fails too: the safest of a family of rate-limited manoeuvres (brake, hold,
         accelerate, reverse, each straight or turning fully left or right; :mod:`agents.fallback`),
         judged by the agent's own risk and the worst-case clearance over the horizon:
@@ -349,6 +350,21 @@ class PathFollowingMPC:
         ]
         return combine(terms) if terms else np.zeros(np.shape(ego)[:-1])
 
+    def _risk_terms(self) -> tuple[bool, bool]:
+        """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
+        risk in its objective (:mod:`agents.risk_budget`); neither by default."""
+        return (False, False)
+
+    def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
+        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`): the
+        sum over the active slots (:data:`agents.ocp.RiskValue`)."""
+        raise NotImplementedError
+
+    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
+        """The risk terms' solver parameters (:data:`agents.ocp.TERMS`) of batch entry ``index``
+        (empty without terms); ``new_episode``: its memory was dropped."""
+        return np.zeros(0)
+
     # ------------------------------------------------------------------ building
     def _risk_variant(self) -> str:
         return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
@@ -358,10 +374,11 @@ class PathFollowingMPC:
             key = (
                 type(self).__name__,
                 variant,
-                problem_key(self.scenario),  # neither epsilon nor the uncertainty: parameters
+                problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty, objects: parameters
                 self.slots,
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
+                self._risk_terms(),
             )
             build = functools.partial(
                 build_problem,
@@ -370,6 +387,8 @@ class PathFollowingMPC:
                 self.settings,
                 self._margin,
                 self._risk_parameter_shape(),
+                self._risk_value if any(self._risk_terms()) else None,
+                self._risk_terms(),
                 self.slots,
             )
             self._problems[variant] = cached_problem(key, build)
@@ -404,8 +423,14 @@ class PathFollowingMPC:
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
         """One step for the observation ``obs_vec`` (10 + 6 K,) of batch entry ``index``
         (:class:`agents.step.Step`), within the wall-time cap."""
-        with Budget.open(self.max_solve_time) as budget:
-            return Step(self, index, obs_vec, budget).run()
+        collecting = gc.isenabled()
+        gc.disable()  # no garbage-collection pause inside the step: it runs between steps
+        try:
+            with Budget.open(self.max_solve_time) as budget:
+                return Step(self, index, obs_vec, budget).run()
+        finally:
+            if collecting:
+                gc.enable()
 
     def _new_episode(self, mem: dict[str, Any], o: ob.Observation) -> bool:
         """The observation does not continue the episode this memory belongs to."""

@@ -25,19 +25,22 @@ The sections of :func:`assemble`, in order:
   the agent's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``, :func:`parameter_vector`): epsilon, then per object slot
+- **Parameters** (nlpsol ``p``, :func:`parameter_vector`): epsilon, v_ref, then per object slot
   k = 0..K-1 (:data:`SLOT_SIZE` numbers): its measurement (c1, c2, theta, v, omega), ``active``
   (1: the object is present and may reach the ego within the horizon, 0: its rows cost nothing),
   its collision distance r_e + r_o [m], its mass m_o [kg] (for the severity) and the numbers of
-  its :class:`~risk_env.scenario.Uncertainty` (:func:`uncertainty_vector`); last the agent's risk
-  data per stage (Monte Carlo draws, every slot's). Agents that differ only in their tolerance,
-  uncertainty level or objects share one built (or compiled) solver, and a solver with K slots
-  serves every scene with up to K objects without a rebuild.
+  its :class:`~risk_env.scenario.Uncertainty` (:func:`uncertainty_vector`); then the agent's risk
+  data per stage (Monte Carlo draws, every slot's); last, with the episode budget or the risk
+  weight, the :data:`TERMS` numbers. Agents that differ only in their tolerance, reference speed,
+  uncertainty level, start or objects share one built (or compiled) solver (:func:`problem_key`),
+  and a solver with K slots serves every scene with up to K objects without a rebuild.
 - **Risk rows of many objects** (:data:`Margin`): the agent's margin returns the rows of one stage
   for all K slots: the RMPC one row per slot (``margin_k + BIG (1 - active_k)``: an inactive slot's
   row holds by :data:`INACTIVE` margin units, whatever its numbers), the SMPC one row per stage on
-  the sum of the slots' risks, ``sum_k active_k R_k <= epsilon``. With one slot, active, both are
-  the single-object rows bit for bit (``+ 0.0`` and ``1.0 *`` are exact).
+  the sum of the slots' risks, ``sum_k active_k R_k <= epsilon``. The budget's and the weight's
+  per-stage R (:data:`RiskValue`) is that sum too: by linearity of expectation the expected total
+  harm of the step. With one slot, active, all are the single-object rows bit for bit (``+ 0.0``
+  and ``1.0 *`` are exact).
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
@@ -46,7 +49,9 @@ The sections of :func:`assemble`, in order:
   [margin units] and ``sum_n rho_n s_n`` added to the objective, ``rho_n = rho *``
   :data:`EARLY_WEIGHT` ``**(N - n)`` (an exact L1 penalty: whenever every rho_n exceeds its risk
   row's multiplier, every solution of the hard problem solves the soft one with s = 0, and a soft
-  solution with s = 0 solves the hard problem). The slack of row n is a
+  solution with s = 0 solves the hard problem). A slack costs up to twice as much near the
+  object's predicted mean (:data:`NEAR_WEIGHT`): where the boxes cannot be kept off, the plan
+  misses them where the object is least likely. The slack of row n is a
   control of stage n (the last stage's after x_N), so the problem stays stage-wise for fatrop.
 
 The solver built on this NLP lives in :mod:`agents.solver`; the controller that calls it in
@@ -68,7 +73,7 @@ from risk_env.dynamics import casadi_step
 from risk_env.ops import CASADI
 from risk_env.path import path_error, timing_law
 from risk_env.prediction import Belief, predict
-from risk_env.scenario import Scenario
+from risk_env.scenario import Pose, Scenario
 
 STAGE_COSTS: tuple[str, ...] = ("reached", "paper")
 SOFT = "_soft"
@@ -78,6 +83,11 @@ EARLY_WEIGHT = 4.0
 """A soft variant's slack of row n costs ``rho * EARLY_WEIGHT**(N - n)``: the earlier a violation,
 the dearer (near lexicographic: the plan keeps clear first at n = 1, then at n = 2, ...), since
 the object's early positions are the likely ones and the later boxes only grow."""
+NEAR_WEIGHT = 1.0
+"""A soft variant's slack of row n costs up to ``1 + NEAR_WEIGHT`` times rho_n where the ego is at
+the object's predicted mean (a Gaussian bump of the belief's spread widened by r_e + r_o)."""
+PARKED = Pose(0.0, 0.0, 0.0)
+"""The pose :func:`problem_key` puts in place of the starts, which the NLP does not see."""
 NX = 6
 """Stage state: c1 [m], c2 [m], theta [rad], lambda [m], previous v [m/s], previous omega [rad/s]."""
 NU = 3
@@ -91,6 +101,12 @@ INACTIVE = 1e3
 Margin = Callable[[ca.SX, list[Belief], ca.SX, ca.SX, ca.SX, bool], ca.SX]
 """``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
 collision distance [m], mass [kg], zero) -> rows``: every row >= 0 iff the step's risk bound holds."""
+TERMS = 5
+"""Parameters of the risk terms (:mod:`agents.risk_budget`), at the end of p: the budget B, the risk
+spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
+RiskValue = Callable[[ca.SX, list[Belief], ca.SX, ca.SX], ca.SX]
+"""``(ego (4,), beliefs (one per slot), risk data (K J, 3), slot numbers (K, 3)) -> R``: the agent's
+per-stage risk summed over the active slots (the budget's and the cost's)."""
 Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
 """``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
 
@@ -116,11 +132,17 @@ def data_shape(risk_shape: tuple[int, int], slots: int) -> tuple[int, int]:
 
 
 def stage_functions(
-    scenario: Scenario, variant: str, margin: Margin, risk_shape: tuple[int, int], slots: int = 1
+    scenario: Scenario,
+    variant: str,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
+    slots: int = 1,
 ) -> dict[str, ca.Function | None]:
     """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, and ``risk`` (ego, beliefs (K, 11), epsilon, data,
-    slot numbers (K, 3)) -> rows (None for ``"free"``)."""
+    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, beliefs (K, 11), epsilon, data,
+    slot numbers (K, 3)) -> rows (None for ``"free"``) and, with ``value``, ``risk_value`` (ego,
+    beliefs, data, slot numbers) -> R (None for ``"free"`` or without ``value``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
     w_c1, w_c2, w_th, _ = sc.cost_weights
@@ -146,7 +168,16 @@ def stage_functions(
             [rows],
             {"is_diff_in": [True, False, False, False, False]},
         )
-    return {"f": f, "pose_cost": pose_cost, "risk": risk}
+    risk_value = None
+    if form != "free" and value is not None:
+        r = value(ego_s, beliefs, data_s, slot_s)
+        risk_value = ca.Function(
+            "risk_value",
+            [ego_s, belief_s, data_s, slot_s],
+            [r],
+            {"is_diff_in": [True, False, False, False]},
+        )
+    return {"f": f, "pose_cost": pose_cost, "risk": risk, "risk_value": risk_value}
 
 
 def assemble(
@@ -156,13 +187,16 @@ def assemble(
     risk_shape: tuple[int, int],
     stage_cost: str,
     soft_penalty: float | None = None,
+    terms: tuple[bool, bool] = (False, False),
     slots: int = 1,
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
     called) for ``slots`` object slots, its :data:`Layout` and one object's beliefs' function
     (measurement (5,), uncertainty numbers (13,)) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho:
     soften the risk rows with slacks (one per stage, tagged ``(n, "s", 0)``, shared by the stage's
-    rows) at cost ``rho * s_n`` (a soft variant)."""
+    rows) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight): the :data:`TERMS`
+    parameters at the end of p, and (with a ``risk_value`` stage function) the episode budget's
+    accumulator and row, the weighted risk in the objective (see the module)."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
@@ -173,9 +207,13 @@ def assemble(
     # collision distance, mass and uncertainty numbers; per-step risk data; the slots' beliefs
     n_unc = len(_UNCERTAINTY_ORDER)
     p_eps = sym.sym("epsilon")
+    p_vref = sym.sym("v_ref")
     p_slots = [sym.sym(f"slot_{k}", SLOT_SIZE) for k in range(slots)]
     p_data = [sym.sym(f"risk_data_{n}", *data_shape(risk_shape, slots)) for n in range(1, N + 1)]
-    p = ca.vertcat(p_eps, *p_slots, *(ca.vec(d) for d in p_data))
+    with_terms = any(terms)
+    p_terms = sym.sym("risk_terms", TERMS) if with_terms else None
+    extra = [p_terms] if with_terms else []
+    p = ca.vertcat(p_eps, p_vref, *p_slots, *(ca.vec(d) for d in p_data), *extra)
     slot_numbers = ca.horzcat(*(q[5:8] for q in p_slots)).T  # (K, 3): active, distance, mass
     fields = [f.name for f in dataclasses.fields(Belief)]
 
@@ -193,6 +231,11 @@ def assemble(
     U = [sym.sym(f"u_{n}", NU) for n in range(N)]
     soft = soft_penalty is not None and risk is not None
     S = {n: sym.sym(f"s_{n}") for n in range(1, N + 1)} if soft else {}
+    value = stages.get("risk_value")
+    budget = terms[0] and value is not None
+    weight = p_terms[4] if terms[1] and value is not None else None
+    C = {n: sym.sym(f"c_{n}") for n in range(1, N + 1)} if budget else {}  # sum of R_1..R_{n-1}
+    s_budget = sym.sym("s_budget") if budget and soft else None
     w: list[Any] = []
     w_tags: list[tuple[int, str, int]] = []
     g: list[Any] = []
@@ -207,39 +250,77 @@ def assemble(
             lbg.append(lo)
             ubg.append(hi)
 
+    def ego_at(n: int) -> Any:
+        return ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
+
+    values = {}
+    if C or weight is not None:
+        values = {n: value(ego_at(n), stacked[n], p_data[n - 1], slot_numbers) for n in range(1, N + 1)}
+
+    def near_weight(x: Any, b: Any) -> Any:
+        """A slack costs more where an object is likelier: 1 + NEAR_WEIGHT times the largest, over
+        the active slots, of a Gaussian bump at the slot's predicted mean (its belief's spread
+        widened by its r_e + r_o); >= 1, so the penalty stays exact."""
+        bumps = []
+        for k in range(slots):
+            q = b[k * Belief.SIZE : (k + 1) * Belief.SIZE]
+            r2 = slot_numbers[k, 1] ** 2
+            z2 = (x[0] - q[0]) ** 2 / (q[4] ** 2 + r2) + (x[1] - q[1]) ** 2 / (q[5] ** 2 + r2)
+            bumps.append(slot_numbers[k, 0] * ca.exp(-0.5 * z2))
+        bump = bumps[0]
+        for other in bumps[1:]:
+            bump = ca.fmax(bump, other)
+        return 1.0 + NEAR_WEIGHT * bump
+
     def add_risk(n: int) -> Any:
-        """The risk row of state n (its slack added in a soft variant); its cost term."""
+        """The risk row of state n (its slack added in a soft variant), at n = N the budget row;
+        their cost terms."""
         if risk is None:
             return 0.0
-        ego_n = ca.vertcat(X[n][0], X[n][1], X[n][2], X[n][4])  # pose of state n, speed v_{n-1}
-        row = risk(ego_n, stacked[n], p_eps, p_data[n - 1], slot_numbers)
-        if not soft:
-            add_g(row, 0.0, math.inf, n, "risk")
-            return 0.0
-        add_g(row + S[n], 0.0, math.inf, n, "risk")
-        return soft_penalty * EARLY_WEIGHT ** (N - n) * S[n]
+        row = risk(ego_at(n), stacked[n], p_eps, p_data[n - 1], slot_numbers)
+        cost = 0.0 if weight is None else weight * values[n]
+        if soft:
+            row = row + S[n]
+            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near_weight(X[n], stacked[n]) * S[n]
+        add_g(row, 0.0, math.inf, n, "risk")
+        if C and n == N:  # (B - spent - sum_n R_n) * normaliser + switch-off >= backoff
+            left = (p_terms[0] - p_terms[1] - C[N] - values[N]) * p_terms[2] + p_terms[3]
+            add_g(left + s_budget if soft else left, 0.0, math.inf, N, "budget")
+            cost += soft_penalty * s_budget if soft else 0.0
+        return cost
 
     def add_slack(n: int) -> None:
-        """The slack of row n, a control of stage n (after u_n; after x_N for n = N)."""
+        """The slack of row n, a control of stage n (after u_n; after x_N for n = N; the budget
+        row's after that)."""
         if n in S:
             w.append(S[n])
             w_tags.append((n, "s", 0))
+        if n == N and s_budget is not None:
+            w.append(s_budget)
+            w_tags.append((N, "s", 1))
+
+    def add_accumulator(n: int) -> None:
+        """c_{n+1} = c_n + R_n (c_1 = 0), the gap row's last component: stage-local."""
+        if C and n < N:
+            add_g(C[n + 1] - (C[n] + values[n] if n >= 1 else 0.0), 0.0, 0.0, n, "accumulate")
 
     # --- objective, dynamics, rate limits and risk, stage-wise
     cost = 0.0
     for n in range(N):
-        w += [X[n], U[n]]
-        w_tags += [(n, "x", i) for i in range(NX)] + [(n, "u", i) for i in range(NU)]
+        w += [X[n], *([C[n]] if n in C else []), U[n]]
+        w_tags += [(n, "x", i) for i in range(NX)] + ([(n, "c", 0)] if n in C else [])
+        w_tags += [(n, "u", i) for i in range(NU)]
         add_slack(n)
         add_g(X[n + 1] - f(X[n], U[n]), 0.0, 0.0, n, "gap")
+        add_accumulator(n)
         add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
             cost += add_risk(n)
-        cost += w_v * (U[n][2] - ego.v_ref) ** 2
+        cost += w_v * (U[n][2] - p_vref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
-    w.append(X[N])
-    w_tags += [(N, "x", i) for i in range(NX)]
+    w += [X[N], *([C[N]] if C else [])]
+    w_tags += [(N, "x", i) for i in range(NX)] + ([(N, "c", 0)] if C else [])
     add_slack(N)
     cost += add_risk(N)
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
@@ -300,19 +381,24 @@ def slot_numbers(scenario: Scenario, slots: int) -> np.ndarray:
 
 def parameter_vector(
     epsilon: float,
+    v_ref: float,
     measurements: np.ndarray,
     active: np.ndarray,
     numbers: np.ndarray,
     data: np.ndarray,
+    terms: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The solver's ``p``: epsilon, per slot k its measurement ``measurements[k]`` (5,), its
-    ``active[k]`` flag, its ``numbers[k]`` (:func:`slot_numbers`), then the per-stage risk data
-    ``(N, K J, 3)`` (each stage's matrix column by column)."""
+    """The solver's ``p``, the one layout of the module: epsilon, v_ref [m/s], per slot k its
+    measurement ``measurements[k]`` (5,), its ``active[k]`` flag and its ``numbers[k]``
+    (:func:`slot_numbers`: r_e + r_o, m_o, uncertainty (13,)), together :data:`SLOT_SIZE`; then
+    the per-stage risk data ``(N, K J, 3)`` (each stage's matrix column by column); last the
+    :data:`TERMS` numbers (``terms``; empty or None without a budget or weight)."""
     blocks = [
         np.concatenate([m, [float(a)], n[:2], n[2:]])
         for m, a, n in zip(measurements, active, numbers, strict=True)
     ]
-    return np.concatenate([[epsilon], *blocks, *(d.ravel(order="F") for d in data)])
+    tail = np.zeros(0) if terms is None else np.asarray(terms, float)
+    return np.concatenate([[epsilon, v_ref], *blocks, *(d.ravel(order="F") for d in data), tail])
 
 
 def symbolic_uncertainty(p: Any) -> SimpleNamespace:
@@ -326,9 +412,13 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
 
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
-    """What of the scenario is built into a solver: all but epsilon, the uncertainty and the
-    objects (each slot's numbers are parameters)."""
-    skip = ("risk_tolerance", "uncertainty", "objects")
-    return tuple(
-        (f.name, getattr(scenario, f.name)) for f in dataclasses.fields(scenario) if f.name not in skip
-    )
+    """What of the scenario is built into a solver: all but the parameters (epsilon, v_ref, the
+    uncertainty, every object's numbers: each slot's are parameters) and what the NLP never sees
+    (the ego's start and initial input, measured at each step; the episode's step limit). The
+    slot count is the agent's, keyed beside this."""
+    rest = max(scenario.ego.v_min, 0.0)  # a valid v_ref and input for every ego
+    ego = dataclasses.replace(scenario.ego, start=PARKED, v_ref=rest, initial_input=(rest, 0.0))
+    skip = ("risk_tolerance", "uncertainty", "max_steps", "ego", "objects")
+    fields = dataclasses.fields(scenario)
+    kept = tuple((f.name, getattr(scenario, f.name)) for f in fields if f.name not in skip)
+    return (("ego", ego), *kept)

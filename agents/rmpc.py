@@ -42,6 +42,13 @@ class RMPC(PathFollowingMPC):
     def __init__(
         self, scenario: Scenario, risk: str = "worst_case", grid_points: int | None = None, **kwargs: Any
     ) -> None:
+        for name in ("risk_budget", "risk_weight"):
+            if kwargs.get(name) is not None:
+                raise ValueError(
+                    f"{name}={kwargs[name]!r} given to the RMPC: its worst-case risk carries no"
+                    " probability, so it has no expectation to budget or weigh (use the SMPC)"
+                )
+            kwargs.pop(name, None)
         if risk not in self.RISK_METHODS:
             raise ValueError(f"unknown RMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
         self.risk_method = risk

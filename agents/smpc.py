@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from agents import risk_budget as rb
+from agents.base import SolveReport
 from agents.mpc import PathFollowingMPC
 from agents.objects import slot_rows, symbolic
 from agents.ocp import INACTIVE
@@ -70,6 +73,15 @@ class SMPC(PathFollowingMPC):
     clearance lifted by :data:`agents.ocp.INACTIVE`, its R times 0); at epsilon = 0 one clearance
     row per slot. With one slot these are the single-object rows exactly.
 
+    **Episode risk budget and risk weight** (:mod:`agents.risk_budget`, where the guarantee and its
+    assumptions are written out): ``risk_budget=B`` asks every plan for spent + sum_n R_{n|k} <= B,
+    spent being the risk of the steps already taken (:meth:`spent_risk`), so that an episode
+    without a fallback has a summed risk (``info["episode_risk"]``) of at most B: with
+    ``severity="probability"`` a bound on the chance of any collision in the episode, with
+    ``"injury"`` on the expected serious injuries per episode. ``risk_tolerance=math.inf`` drops
+    the per-step bound (the budget alone). ``risk_weight=w`` adds ``w * sum_n R_{n|k}`` to the
+    objective, with or without either bound.
+
     The severity model is the scenario's (``scenario.severity``). See
     :class:`agents.mpc.PathFollowingMPC` for the problem, solver options and the fallback (the soft
     problem, then the safest manoeuvre; counted in :attr:`failures`, never raised).
@@ -87,8 +99,16 @@ class SMPC(PathFollowingMPC):
         smoothing: float | None = None,
         severity_smoothing: float = 0.05,
         pilot_samples: int | None = 100,
+        risk_budget: float | None = None,
+        risk_weight: float | None = None,
         **kwargs: Any,
     ) -> None:
+        self.risk_budget = rb.check_budget(risk_budget)
+        """B, the episode risk budget [the severity's unit] (None: none); fixed at construction."""
+        self.risk_weight = rb.check_weight(risk_weight)
+        """w, the weight of sum_n R_{n|k} in the objective (None: none); fixed at construction."""
+        self._spent: dict[int, float] = {}
+        self._budget_backoff = float(kwargs.get("backoff", 1e-3))
         if risk not in self.RISK_METHODS:
             raise ValueError(f"unknown SMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
         for name, value in (("samples", samples), ("pilot_samples", pilot_samples)):
@@ -107,6 +127,7 @@ class SMPC(PathFollowingMPC):
         if risk == "monte_carlo" and pilot_samples and pilot_samples < self.estimator.samples:
             est = self.estimator
             options = {k: v for k, v in kwargs.items() if k not in ("risk_tolerance", "seed")}
+            # the pilot plans a first guess only: without the budget's and the weight's terms
             self._pilot = SMPC(
                 scenario,
                 risk="monte_carlo",
@@ -126,12 +147,38 @@ class SMPC(PathFollowingMPC):
         return MonteCarloRisk(scenario, **self._options)
 
     @property
+    def risk_tolerance(self) -> float:
+        """epsilon [units of the severity]; ``math.inf`` (with a budget only): no per-step bound."""
+        return self._requested_epsilon
+
+    @risk_tolerance.setter
+    def risk_tolerance(self, value: float) -> None:
+        budget = getattr(self, "risk_budget", None)
+        if budget is not None and isinstance(value, (int, float)) and value == math.inf:
+            self._requested_epsilon = math.inf
+        else:
+            if isinstance(value, (int, float)) and value == math.inf:
+                raise ValueError(
+                    "risk_tolerance=inf (no per-step bound) needs a risk_budget; got risk_budget=None"
+                )
+            PathFollowingMPC.risk_tolerance.fset(self, value)  # checks, sets _epsilon
+            self._requested_epsilon = self._epsilon
+        scale = self.estimator.severity.scale
+        self._epsilon = rb.effective_tolerance(self._requested_epsilon, budget, self._budget_backoff, scale)
+
+    def spent_risk(self, index: int = 0) -> float:
+        """spent_k of batch entry ``index``: the summed one-step risk R_{1|j} of the actions applied
+        so far in its episode, by the agent's own estimator (0 without a budget)."""
+        return self._spent.get(index, 0.0)
+
+    @property
     def samples(self) -> int | None:
         """J, the Monte Carlo draws per step (None for the exact risk)."""
         return getattr(self.estimator, "samples", None)
 
     def reset(self, seed: int | None = None) -> None:
         super().reset(seed)
+        self._spent.clear()
         if getattr(self, "_pilot", None) is not None:  # its draws restart too
             self._pilot.reset(None if seed is None else seed + 1)
 
@@ -140,6 +187,38 @@ class SMPC(PathFollowingMPC):
             return ("exact",)
         est = self.estimator
         return ("monte_carlo", est.samples, est.bandwidth, est.smoothing, est.severity_smoothing)
+
+    def _risk_terms(self) -> tuple[bool, bool]:
+        return (self.risk_budget is not None, bool(self.risk_weight))
+
+    def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
+        """The per-stage R of the budget and the weight: the constraint's own R (exact:
+        :meth:`~risk_env.risk.ExactRisk.solver_risk`; Monte Carlo: the smoothed estimate) summed
+        over the active slots, the expected total harm of the step (linearity of expectation)."""
+        J = self.samples or 0
+        total = None
+        for k, belief in enumerate(beliefs):
+            est = symbolic(self.estimators[k], numbers[k, 1], numbers[k, 2])
+            if self.risk_method == "monte_carlo":
+                r = est.casadi_risk(ego, belief, samples=slot_rows(data, k, J))
+            else:
+                r = est.solver_risk(ego, belief)
+            total = numbers[k, 0] * r if total is None else total + numbers[k, 0] * r
+        return total
+
+    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
+        if not any(self._risk_terms()):
+            return np.zeros(0)
+        if new_episode:
+            self._spent[index] = 0.0
+        return rb.terms_parameters(self.risk_budget, self._spent.get(index, 0.0), self.risk_weight)
+
+    def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
+        """One step; with a budget, the applied action's one-step risk R_{1|k} is added to spent."""
+        report = super()._step(index, obs_vec)
+        if self.risk_budget is not None:
+            self._spent[index] = self._spent.get(index, 0.0) + float(np.asarray(report.risk_fn())[0])
+        return report
 
     def _risk_parameter_shape(self) -> tuple[int, int]:
         return (self.estimator.samples, 3) if self.risk_method == "monte_carlo" else (0, 0)

@@ -49,6 +49,7 @@ from agents.ocp import (
     SOFT,
     STAGE_COSTS,
     Margin,
+    RiskValue,
     assemble,
     parameter_vector,
     slot_numbers,
@@ -202,9 +203,14 @@ class Problem:
     u_index: np.ndarray
     """(N, NU) positions of the inputs in w."""
     risk_rows: np.ndarray
-    """Rows of g holding margin_n, n = 1..N (empty for ``"free"``)."""
+    """Rows of g holding the risk rows of n = 1..N (one per stage or one per object slot and stage)
+    and the budget's row (empty for ``"free"``)."""
+    row_slack: np.ndarray
+    """For each of :attr:`risk_rows`, the position of its slack in :attr:`slack_index` (a stage's
+    rows share one; empty for hard variants)."""
     slack_index: np.ndarray
-    """Positions of the slacks s_n, n = 1..N, in w (empty for hard variants)."""
+    """Positions of the slacks s_n, n = 1..N (and the budget row's), in w (empty for hard
+    variants)."""
     slack_costs: np.ndarray
     """rho_n, the cost of each slack s_n, in the order of :attr:`slack_index` (empty for hard
     variants)."""
@@ -220,6 +226,10 @@ class Problem:
     """Whether the solver's functions were compiled."""
     times: CallTimes
     """The rungs' limits and the measured time per iteration (shared by the cached copies)."""
+    acc_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
+    acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Rows of g of c_{n+1} = c_n + R_n, n = 0..N-1 (empty without a budget)."""
 
     @property
     def n_w(self) -> int:
@@ -254,17 +264,20 @@ def build_problem(
     settings: SolverSettings,
     margin: Margin,
     risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
+    terms: tuple[bool, bool] = (False, False),
     slots: int = 1,
 ) -> Problem:
     """Build the NLP of :mod:`agents.ocp` for ``variant`` with ``slots`` object slots and its
-    solver (compiled with ``settings.jit`` where a C compiler works)."""
+    solver (compiled with ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the
+    risk budget and weight (:func:`agents.ocp.assemble`)."""
     t0 = time.perf_counter()
     N = scenario.horizon
-    stages = stage_functions(scenario, variant, margin, risk_shape, slots)
+    stages = stage_functions(scenario, variant, margin, risk_shape, value, slots)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
     penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, slots
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots
     )
 
     base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
@@ -278,7 +291,7 @@ def build_problem(
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
         # code holds the risk row and its derivatives once instead of N times; every rung loads
         # the one library, whose compiled "nlp" leaves nothing to expand
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, slots)
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots)
         base["expand"] = False
         library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
         jit = library is not None
@@ -309,6 +322,14 @@ def build_problem(
     solvers = [make(r) for r in rungs] + [smallest]
     limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
 
+    risk_rows = [i for i, tag in enumerate(g_tags) if tag[1] in ("risk", "budget")]
+    slacks = {tag: j for j, tag in enumerate(tag for tag in w_tags if tag[1] == "s")}
+    # the slack of each risk row: its stage's (n, "s", 0), the budget row's (N, "s", 1)
+    row_slack = np.array(
+        [slacks.get((g_tags[i][0], "s", int(g_tags[i][1] == "budget")), -1) for i in risk_rows], dtype=int
+    )
+    if not slacks:
+        row_slack = np.zeros(0, dtype=int)
     return Problem(
         variant=variant,
         solvers=tuple(solvers),
@@ -320,7 +341,8 @@ def build_problem(
         ubg=np.array(ubg),
         x_index=x_index,
         u_index=u_index,
-        risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+        risk_rows=np.array(risk_rows, dtype=int),
+        row_slack=row_slack,
         slack_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int),
         slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
         w_tags=tuple(w_tags),
@@ -329,6 +351,8 @@ def build_problem(
         build_time=time.perf_counter() - t0,
         jit=jit,
         times=CallTimes(limits, prior, failing),
+        acc_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "c"], dtype=int),
+        acc_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "accumulate"], dtype=int),
     )
 
 
@@ -356,7 +380,9 @@ def iteration_time(
         active[k] = 1.0
     rows = risk_shape[0] * slots
     data = np.zeros((N, rows, risk_shape[1] if rows else 0))
-    p = parameter_vector(scenario.risk_tolerance, measurements, active, slot_numbers(scenario, slots), data)
+    numbers = slot_numbers(scenario, slots)
+    p = parameter_vector(scenario.risk_tolerance, scenario.ego.v_ref, measurements, active, numbers, data)
+    p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
     lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0)
     w0 = np.zeros(n_w)
     w0[x_index] = x0

@@ -26,7 +26,11 @@ if TYPE_CHECKING:
     from agents.mpc import PathFollowingMPC
 
 SOFT_SHARE = 0.3
-"""Share of the cap the hard problem's calls leave to the soft problem."""
+"""Most of the cap the hard problem's calls leave to the soft problem."""
+OPTIONAL_SHARE = 0.1
+"""Share of the cap kept free by the soft level's further starts once one plan converged."""
+SOFT_ITERATIONS = 30
+"""Iterations a soft solve is given time for, before the hard problem's calls."""
 FEASIBLE_SLACK = 1e-4
 """Slacks up to this [margin units] count as zero: the hard problem was feasible."""
 MANOEUVRE_TIME = 3e-3
@@ -60,16 +64,16 @@ class Step:
         )
         self.variant = agent._risk_variant() if self.active.any() else "free"
         self.data = agent._risk_data(self.futures)
-        self.p = parameter_vector(agent._epsilon, o.objects, self.active, numbers, self.data)
+        terms = agent._terms_parameters(index, self.memory is None)
+        v_ref = agent.scenario.ego.v_ref
+        self.p = parameter_vector(agent._epsilon, v_ref, o.objects, self.active, numbers, self.data, terms)
         self.tally = Tally()
 
     # ------------------------------------------------------------------ the levels
     def run(self) -> SolveReport:
         """The three levels in order; the report of the one that acted."""
         agent, budget = self.agent, self.budget
-        capped = math.isfinite(agent.max_solve_time) and self.variant != "free"
-        soft_time = agent.max_solve_time * SOFT_SHARE if capped else 0.0
-        budget.reserve = agent._manoeuvre_time + soft_time
+        budget.reserve = agent._manoeuvre_time + self.soft_reserve()
         pr = agent._problem(self.variant)
         # elastic mode: after a step that missed the risk bound, the hard problem is most likely
         # infeasible still; its exact penalty (b) gives its solution where it is feasible
@@ -80,7 +84,7 @@ class Step:
         if out is None and self.variant != "free":
             budget.reserve = agent._manoeuvre_time
             soft = agent._problem(soft_variant(self.variant))
-            out, violation = self.soft(soft)
+            out, violation = self.soft(soft, elastic)
             if out is not None:
                 pr = soft
                 if violation <= FEASIBLE_SLACK:  # the exact penalty's solution: the hard problem's
@@ -100,8 +104,21 @@ class Step:
             kind = "manoeuvre"
             name, inputs = self.manoeuvre()
             states, cost = guesses.rollout(self.base, self.x0, inputs), float("nan")
-            mem = {"plan": inputs, "lam_x": None, "variant": None, "violation": math.inf}
+            # not elastic after this: nothing converged, maybe for lack of time (the soft problem
+            # is no faster), so the next step tries the hard problem again, from this plan
+            mem = {"plan": inputs, "lam_x": None, "variant": None, "violation": 0.0, "manoeuvre": True}
         return self.report(pr, kind, states, inputs, cost, mem, violation, name, retried)
+
+    def soft_reserve(self) -> float:
+        """Time [s] the hard problem's calls leave to the soft one: what :data:`SOFT_ITERATIONS`
+        of its iterations take, if that fits in :data:`SOFT_SHARE` of the cap; else nothing (the
+        soft problem could not finish in time anyway, so the hard one gets the time)."""
+        cap = self.agent.max_solve_time
+        if not math.isfinite(cap) or self.variant == "free":
+            return 0.0
+        times = self.agent._problem(soft_variant(self.variant)).times
+        need = SOFT_ITERATIONS * times.per_iteration(SOFT_ITERATIONS)
+        return need if need <= SOFT_SHARE * cap else 0.0
 
     def hard(self, pr: Problem, reserve: float) -> tuple[Outputs | None, bool]:
         """Level (a): ``(the best converged call or None, whether it followed a failed call)``.
@@ -117,20 +134,38 @@ class Step:
         if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
             inputs, iterations = planned
             self.tally.iterations += iterations
-            head = [(guesses.pack(pr, guesses.rollout(pr, self.x0, inputs), inputs), None, None)]
+            w0 = guesses.pack(pr, guesses.rollout(pr, self.x0, inputs), inputs)
+            head = [(guesses.fill_accumulators(pr, w0, self.p), None, None)]
             out, calls = self.solve(pr, head, reserve)
             if out is not None or calls == 0:
                 return out, False
-        points = self.guesses(pr, extra=False, cold=not warm)
+        # after a manoeuvre its continuation is a poor start for path following: the best
+        # rollout first, then that
+        after_manoeuvre = warm and mem.get("manoeuvre", False)
+        points = self.guesses(pr, extra=False, cold=not warm or after_manoeuvre, cold_first=after_manoeuvre)
         out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=agent._manoeuvre_time)
         return out, out is not None and self.tally.failed_calls > 0
 
-    def soft(self, soft: Problem) -> tuple[Outputs | None, float]:
-        """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``."""
-        out, _ = self.solve(soft, self.guesses(soft, extra=True), self.agent._manoeuvre_time)
-        if out is None:
-            return None, 0.0
-        return out, max(float(np.max(out["x"][soft.slack_index])), 0.0)
+    def soft(self, soft: Problem, elastic: bool) -> tuple[Outputs | None, float]:
+        """Level (b): ``(the soft problem's plan or None, its violation max_n s_n)``: from the
+        shifted plan, then (unless ``elastic``: the last step missed the bound too, and its
+        plan is the best start) the best rollouts and manoeuvres while the time lasts, until a
+        plan without violation (the hard problem's solution); else the plan of least objective,
+        so of least (early-weighted) violation."""
+
+        def violation(out: Outputs) -> float:
+            return max(float(np.max(out["x"][soft.slack_index])), 0.0)
+
+        def feasible(out: Outputs) -> bool:
+            return violation(out) <= FEASIBLE_SLACK
+
+        points = self.guesses(soft, extra=True, cold=not elastic)
+        # once a plan is in hand the other starts are optional: they keep a margin of the cap
+        reserve = self.agent._manoeuvre_time
+        cap = self.agent.max_solve_time
+        optional = reserve + (OPTIONAL_SHARE * cap if math.isfinite(cap) else 0.0)
+        out, _ = self.solve(soft, points, reserve, keep_best=True, reserve_after=optional, enough=feasible)
+        return (None, 0.0) if out is None else (out, violation(out))
 
     def manoeuvre(self) -> tuple[str, np.ndarray]:
         """Level (c): ``(name, inputs (N, NU))`` of the safest manoeuvre (:mod:`agents.fallback`),
@@ -160,18 +195,12 @@ class Step:
         reserve: float,
         keep_best: bool = False,
         reserve_after: float | None = None,
+        enough: Any = None,
     ) -> tuple[Outputs | None, int]:
         """:func:`agents.attempts.solve` of ``pr`` from ``points`` within the step's budget."""
+        args, call, tally = self.args(pr), self.agent._call, self.tally
         return attempts.solve(
-            self.agent._call,
-            pr,
-            points,
-            self.args(pr),
-            self.budget,
-            reserve,
-            self.tally,
-            keep_best,
-            reserve_after,
+            call, pr, points, args, self.budget, reserve, tally, keep_best, reserve_after, enough
         )
 
     def args(self, pr: Problem) -> dict[str, Any]:
@@ -187,19 +216,30 @@ class Step:
         lbg[pr.risk_rows] = self.agent.backoff
         return lbg
 
-    def guesses(self, pr: Problem, extra: bool, cold: bool = True) -> Iterator[Guess]:
+    def guesses(
+        self, pr: Problem, extra: bool, cold: bool = True, cold_first: bool = False
+    ) -> Iterator[Guess]:
         """Initial points, lazily: the shifted previous plan (if any), then (``cold``) the cold
-        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them)."""
+        rollouts best first, up to ``cold_starts`` (``extra``: the manoeuvres ranked with them); for
+        the hard problem only the best when even that one misses its rows (then the hard problem
+        is likely infeasible, and the soft one takes the other starts). ``cold_first``: the best
+        rollout, then the shifted plan."""
         agent, mem, lbg = self.agent, self.memory, self.lbg(pr)
+        warm: list[Guess] = []
         if mem is not None and mem.get("plan") is not None:
             ipopt = agent.settings.warm_start and agent.settings.solver == "ipopt"
             old = agent._problems.get(mem["variant"]) if ipopt else None
-            yield attempts.warm_guess(pr, old, mem, self.x0, self.p, lbg, agent._maps)
-        if not cold:
-            return
-        more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
-        for w0 in guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)[: agent.cold_starts]:
-            yield w0, None, None
+            warm = [attempts.warm_guess(pr, old, mem, self.x0, self.p, lbg, agent._maps)]
+        if not cold_first:
+            yield from warm
+        if cold:
+            more = fallback.manoeuvres(agent.scenario, self.x0) if extra else None
+            cold_points = guesses.cold_guesses(pr, agent.scenario, self.x0, self.p, lbg, more)
+            likely_infeasible = not pr.soft and cold_points[0][1] > 0.0  # even the best misses its rows
+            for w0, _ in cold_points[: 1 if likely_infeasible or cold_first else agent.cold_starts]:
+                yield w0, None, None
+        if cold_first:
+            yield from warm
 
     def report(
         self,
@@ -230,6 +270,7 @@ class Step:
         tally = self.tally
         return SolveReport(
             solve_time=time.perf_counter() - self.budget.start,
+            cpu_time=time.process_time() - self.budget.cpu_start,
             success=kind != "manoeuvre",
             status=tally.status if kind != "manoeuvre" else f"manoeuvre {name} ({tally.status})",
             iterations=tally.iterations,

@@ -57,3 +57,17 @@ def parser(name: str, doc: str | None) -> argparse.ArgumentParser:
         epilog=epilog,
         formatter_class=HelpFormatter,
     )
+
+
+def add_sweep_options(parser: argparse.ArgumentParser) -> None:
+    """``--workers`` and ``--ray``: where the shared sweep (:mod:`benchmarks.sweep`) runs the jobs."""
+    parser.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=False,
+        metavar="ADDRESS",
+        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
+        " (default: a process pool)",
+    )

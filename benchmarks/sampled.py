@@ -18,9 +18,14 @@ harm per step (mean of I_C s over the steps that happened: it should match the m
 episode's summed risk (``info["episode_risk"]``, mean and max over episodes), the realised harm
 per episode (it should match the mean episode risk), e_acc, d_min and the goal rate.
 
-The per-episode columns are what an episode risk budget B is judged by (episode risk against B,
-collision rate per episode against B with the probability severity): a budget row needs only a
-``Job`` field passed on to the agent as ``risk_budget=B``.
+``--budgets`` adds a row per episode risk budget B (in the severity's own unit, checked as the
+tolerances are) for each SMPC agent, built with ``risk_budget=B`` and no per-step bound
+(:mod:`benchmarks.budget_rows`, written to ``budget.csv`` and a second table of ``sampled.md``).
+With ``--budgets`` and no ``--tolerances`` the agents that take no budget (RMPC, PPO) run at
+epsilon = 0 and the SMPC agents run the budget rows only.
+
+    python -m benchmarks.sampled --agents rmpc:worst_case,smpc:exact --severities probability \
+        --budgets 0.05,0.01 --episodes 1000 --out docs/results/budget
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
+from benchmarks.budget_rows import BUDGET_COLUMNS, markdown_budget, summarise_budget
 from benchmarks.rollout import AGENTS, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
 from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
@@ -78,6 +84,10 @@ class Job:
     seeds: tuple[int, ...]
     scene: str = "paper"
     """Which road users cross (:data:`risk_env.SCENE_NAMES`)."""
+    budget: float | None = None
+    """An episode risk budget B: the agent gets ``risk_budget=B`` and no per-step bound."""
+    max_solve_time: float | None = None
+    """The MPC's wall-time cap per step [s] (None: its default, 20 % of T; ``math.inf``: none)."""
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -107,7 +117,12 @@ def run_job(job: Job) -> list[dict[str, Any]]:
         object_motion="sampled",
         scene=job.scene,
     )
-    agent = build_agent(*AGENTS[job.agent], env)
+    options: dict[str, Any] = {}
+    if job.budget is not None:
+        options.update(risk_budget=job.budget, risk_tolerance=math.inf)
+    if job.max_solve_time is not None and not job.agent.startswith("ppo"):
+        options["max_solve_time"] = job.max_solve_time
+    agent = build_agent(*AGENTS[job.agent], env, **options)
     scenario = env.unwrapped.scenario
     severities = [make_severity(scenario.for_object(i)) for i in range(len(scenario.objects))]
     radii = scenario.collision_distances
@@ -236,10 +251,24 @@ def build_parser() -> argparse.ArgumentParser:
         " SEVERITY=EPS,... to give a severity its own list",
     )
     p.add_argument(
+        "--budgets",
+        action="append",
+        metavar="[SEVERITY=]B,...",
+        help="comma list of episode risk budgets B in the severity's own unit: a row per budget for"
+        " each SMPC agent (risk_budget=B, no per-step bound); repeat as SEVERITY=B,... (default: none)",
+    )
+    p.add_argument(
         "--scene",
         default="paper",
         choices=SCENE_NAMES,
         help="which road users cross (risk_env.scenes; default: the paper's one object)",
+    )
+    p.add_argument(
+        "--max-solve-time",
+        type=float,
+        default=math.inf,
+        help="the MPC agents' wall-time cap per step [s]; inf: none, so that results do not depend on"
+        " the machine's load; 0.1: the agents' own default, 20%% of T",
     )
     p.add_argument("--episodes", type=int, default=200, help="seeded episodes per configuration")
     p.add_argument("--chunk", type=int, default=25, help="episodes per job (one agent build per job)")
@@ -249,16 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=Path("results"),
         help="output folder for sampled.csv and sampled.md; the committed ones are in docs/results",
     )
-    p.add_argument("--workers", type=int, default=None, help="processes (default: one per core)")
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="",
-        default=False,
-        metavar="ADDRESS",
-        help="run on Ray: a local instance without ADDRESS, else the cluster at ADDRESS"
-        " (default: a process pool)",
-    )
+    cli.add_sweep_options(p)
     return p
 
 
@@ -277,17 +297,25 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args.uncertainty = [u for u in args.uncertainty.split(",") if u]
     if bad := [u for u in args.uncertainty if u not in UNCERTAINTY_PRESETS]:
         p.error(f"unknown uncertainty {bad}; expected from {list(UNCERTAINTY_PRESETS)}")
+    only_budgets = bool(args.budgets) and not args.tolerances
     try:
-        args.tolerances = parse_tolerances(args.tolerances or ["0,1000,2500"], args.severities)
+        args.tolerances = parse_tolerances(
+            args.tolerances or (["0"] if only_budgets else ["0,1000,2500"]), args.severities
+        )
+        args.budgets = parse_tolerances(args.budgets, args.severities, "budget") if args.budgets else {}
     except ValueError as error:
         p.error(str(error))
+    args.only_budgets = only_budgets
     if args.episodes < 1 or args.chunk < 1:
         p.error("--episodes and --chunk must be >= 1")
     return args
 
 
-def parse_tolerances(groups: list[str], severities: list[str]) -> dict[str, list[float]]:
-    """``--tolerances`` values -> epsilon per severity, each in that severity's own unit.
+def parse_tolerances(
+    groups: list[str], severities: list[str], what: str = "tolerance"
+) -> dict[str, list[float]]:
+    """``--tolerances`` (``what="budget"``: ``--budgets``) values -> epsilon (B) per severity, each
+    in that severity's own unit.
 
     A group ``"A,B"`` applies to every severity without a group of its own ``"NAME=A,B"``. Raises
     ``ValueError`` naming a value that is not a number, or not one of its severity's unit
@@ -300,14 +328,15 @@ def parse_tolerances(groups: list[str], severities: list[str]) -> dict[str, list
     for group in groups:
         name, sep, values = group.rpartition("=")
         name = name.strip()
+        flag = f"--{what}s"
         if sep and name not in severities:
             raise ValueError(
-                f"--tolerances {group!r} names severity {name!r}, not one of --severities {severities}"
+                f"{flag} {group!r} names severity {name!r}, not one of --severities {severities}"
             )
         try:
             numbers = [float(t) for t in values.split(",") if t.strip()]
         except ValueError:
-            raise ValueError(f"--tolerances {group!r}: expected numbers separated by commas") from None
+            raise ValueError(f"{flag} {group!r}: expected numbers separated by commas") from None
         if sep:
             own[name] = numbers
         else:
@@ -316,45 +345,76 @@ def parse_tolerances(groups: list[str], severities: list[str]) -> dict[str, list
     for severity in severities:
         chosen = own.get(severity, common)
         if not chosen:
-            raise ValueError(f"no tolerances for severity {severity!r}: pass --tolerances {severity}=EPS,...")
-        out[severity] = [
-            check_tolerance(e, severity, f"--tolerances value for severity {severity!r}") for e in chosen
-        ]
+            raise ValueError(f"no {what}s for severity {severity!r}: pass --{what}s {severity}=VALUE,...")
+        label = f"--{what}s value for severity {severity!r}"
+        out[severity] = [check_tolerance(e, severity, label) for e in chosen]
     return out
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     args = parse_args(argv)
+    smpc = [a for a in args.agents if AGENTS[a][0] == "SMPC"]
     configs = [
-        (a, s, u, e)
+        (a, s, u, e, None)
         for a in args.agents
+        if not (args.only_budgets and a in smpc)
         for s in args.severities
         for u in args.uncertainty
         for e in args.tolerances[s]
     ]
+    configs += [
+        (a, s, u, b, b)
+        for a in smpc
+        for s in args.severities
+        for u in args.uncertainty
+        for b in args.budgets.get(s, [])
+    ]
     jobs = [
-        Job(a, s, u, e, tuple(range(start, min(start + args.chunk, args.episodes))), args.scene)
-        for (a, s, u, e) in configs
+        Job(
+            a,
+            s,
+            u,
+            e,
+            tuple(range(start, min(start + args.chunk, args.episodes))),
+            args.scene,
+            b,
+            args.max_solve_time,
+        )
+        for (a, s, u, e, b) in configs
         for start in range(0, args.episodes, args.chunk)
     ]
     t0 = time.perf_counter()
     results = run_sweep(run_job, jobs, args.workers, args.ray, desc="episode chunks")
     by_config: dict[tuple, list[dict[str, Any]]] = {}
     for job, episodes in zip(jobs, results):
-        by_config.setdefault((job.agent, job.severity, job.uncertainty, job.epsilon), []).extend(episodes)
-    rows = [summarise(Job(*cfg, (), args.scene), eps) for cfg, eps in by_config.items()]
+        key = (job.agent, job.severity, job.uncertainty, job.epsilon, job.budget)
+        by_config.setdefault(key, []).extend(episodes)
+    rows, budget_rows = [], []
+    for (a, s, u, e, b), eps in by_config.items():
+        row = summarise(Job(a, s, u, e, (), args.scene), eps)
+        if b is None:
+            rows.append(row)
+        else:
+            budget_rows.append(summarise_budget(row, b, eps))
     args.out.mkdir(parents=True, exist_ok=True)
+    if budget_rows:
+        with (args.out / "budget.csv").open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=BUDGET_COLUMNS)
+            writer.writeheader()
+            writer.writerows(budget_rows)
     with (args.out / "sampled.csv").open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=COLUMNS)
         writer.writeheader()
         writer.writerows(rows)
     text = (
-        markdown(rows) + f"\nWall time: {time.perf_counter() - t0:.0f} s for {len(configs)} configurations.\n"
+        markdown(rows)
+        + (f"\n{markdown_budget(budget_rows)}" if budget_rows else "")
+        + f"\nWall time: {time.perf_counter() - t0:.0f} s for {len(configs)} configurations.\n"
     )
     (args.out / "sampled.md").write_text(text)
     print(text)
     print(f"Wrote:\n  {args.out / 'sampled.csv'}\n  {args.out / 'sampled.md'}")
-    return rows
+    return rows + budget_rows
 
 
 if __name__ == "__main__":

@@ -12,9 +12,9 @@ A scene (:func:`make_scenes`, reproducible from ``(seed, index)``) draws:
   ``"crossing"`` (timed to cross the path 2-8 s ahead, near where the ego would be then, at
   1-4 m/s) and ``"never"`` (12-25 m off the path, heading away from it or along it, 0-4 m/s).
 
-**Infeasible steps** (:func:`infeasible_first_step`): for the agents whose risk row is the box
-clearance (the RMPC, the exact SMPC at epsilon = 0), a step is certified infeasible when no input
-within the rate limits clears even the first truncation box; such a step needs a fallback level
+**Infeasible steps** (:func:`infeasible_step`): for the agents whose risk row is the box clearance
+(the RMPC, the exact SMPC at epsilon = 0), a step is certified infeasible when no input within the
+rate limits clears the truncation box at some prediction step; such a step needs a fallback level
 whatever the solver does.
 
 **Avoidable collision** (:func:`avoidable`): some open-loop manoeuvre of :func:`manoeuvres`, from
@@ -200,29 +200,40 @@ def avoidable(scene: Scene, truth: np.ndarray | None = None) -> bool:
 
 
 CERTIFY_GRID = 61
-"""Points per input axis of :func:`infeasible_first_step`'s grid."""
+"""Points per input axis of :func:`infeasible_step`'s grid at n = 1."""
 
 
-def infeasible_first_step(
+def infeasible_step(
     scenario: Scenario, ego_pose: np.ndarray, last_input: np.ndarray, measurement: np.ndarray, backoff: float
 ) -> bool:
-    """Whether no input within the bounds and rate limits keeps the ego's next position clear of
-    the object's first truncation box by ``backoff`` [m] (the RMPC's row at n = 1, and the exact
-    SMPC's at epsilon = 0): certified on a grid of the inputs, with the grid's worst position error
-    (a Lipschitz bound) as margin. ``ego_pose`` (3,), ``last_input`` (v, omega), ``measurement``
-    the object's (c1, c2, theta, v, omega)."""
-    ego, dt = scenario.ego, scenario.dt
+    """Whether no input sequence within the bounds and rate limits keeps the ego clear of the
+    object's truncation box by ``backoff`` [m] at some prediction step n (the RMPC's rows, and the
+    exact SMPC's at epsilon = 0), so that the hard problem is infeasible. Certified at n = 1 on a
+    grid of the first inputs, with the grid's worst position error (a Lipschitz bound) as margin;
+    at every n by the disc the ego can reach (the speeds under the rate limits, summed): if even
+    its farthest point stays within r_e + r_o of the box. ``ego_pose`` (3,), ``last_input``
+    (v, omega), ``measurement`` the object's (c1, c2, theta, v, omega)."""
+    ego, dt, r = scenario.ego, scenario.dt, scenario.collision_distance
     dv, dw = ego.accel_max * dt, ego.omega_rate_max * dt
+    beliefs = predict(scenario, tuple(float(m) for m in measurement))[1:]
+    # every n: the reachable disc
+    cap = max(abs(ego.v_min), abs(ego.v_max))
+    reach = np.cumsum(np.minimum(cap, abs(last_input[0]) + dv * np.arange(1, scenario.horizon + 1))) * dt
+    for b, radius in zip(beliefs, reach):
+        centre = signed_box_distance(ego_pose[0] - b.x, ego_pose[1] - b.y, b.half_x, b.half_y)
+        if centre + radius - r < backoff:
+            return True
+    # n = 1: a grid of the first inputs
     v = np.linspace(max(ego.v_min, last_input[0] - dv), min(ego.v_max, last_input[0] + dv), CERTIFY_GRID)
     w = np.linspace(
         max(-ego.omega_max, last_input[1] - dw), min(ego.omega_max, last_input[1] + dw), CERTIFY_GRID
     )
     vv, ww = np.meshgrid(v, w, indexing="ij")
     x, y, _ = unicycle_step(*(np.full(vv.shape, c) for c in ego_pose[:3]), vv, ww, dt, NUMPY)
-    belief = predict(scenario, tuple(float(m) for m in measurement), steps=1)[1]
-    distance = signed_box_distance(x - belief.x, y - belief.y, belief.half_x, belief.half_y)
+    b = beliefs[0]
+    distance = signed_box_distance(x - b.x, y - b.y, b.half_x, b.half_y)
     # a position between grid points lies within this of one: the arc moves by at most dt per m/s
     # of speed and by |v| dt^2 / 2 per rad/s of turn rate
     h_v, h_w = (v[-1] - v[0]) / (CERTIFY_GRID - 1), (w[-1] - w[0]) / (CERTIFY_GRID - 1)
     slack = 0.5 * (dt * h_v + np.max(np.abs(v)) * dt * dt * h_w)
-    return bool(np.max(distance) - scenario.collision_distance + slack < backoff)
+    return bool(np.max(distance) - r + slack < backoff)

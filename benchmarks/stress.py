@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import gc
+import os
 import shlex
 import sys
 import time
@@ -30,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from benchmarks.scenes import Scene, infeasible_first_step, make_scenes, object_truth, witness_clearance
-from benchmarks.sweep import run_sweep
+from benchmarks.scenes import Scene, infeasible_step, make_scenes, object_truth, witness_clearance
+from benchmarks.sweep import default_workers, run_sweep
 
 AGENTS: dict[str, tuple[str, str, float]] = {
     "rmpc": ("RMPC", "worst_case", 0.0),
@@ -82,6 +84,8 @@ SUMMARY_COLUMNS = (
     "solve_ms_p95",
     "solve_ms_p99",
     "solve_ms_max",
+    "cpu_ms_max",
+    "soft_violation_median",
 )
 
 
@@ -105,6 +109,7 @@ def run_job(job: Job) -> dict[str, Any]:
     scene = job.scene
     env = gym.make("RiskCrossing-v0", **scene.env_kwargs(epsilon))
     agent = build_agent(method, risk, env, seed=scene.index, **dict(job.options))
+    gc.collect()  # the previous episode's agent (its reports hold it in a cycle) goes here, not in a step
     record = rollout(agent, env, seed=scene.seed)
     env.close()
     truth = object_truth(scene)
@@ -137,18 +142,20 @@ def run_job(job: Job) -> dict[str, Any]:
         "solve_ms_p50": round(float(np.median(ms)), 3),
         "solve_ms_max": round(float(ms.max()), 3),
         "_times": record.solve_time,
+        "_cpu": np.array([getattr(r, "cpu_time", np.nan) for r in reports]),
+        "_violations": np.array([r.violation for r in reports if r.fallback == "soft"]),
     }
 
 
 def infeasible_steps(scene: Scene, record: Any, epsilon: float, agent: Any) -> int:
-    """Fallback steps of the episode certified infeasible at n = 1 (:func:`scenes.infeasible_first_step`,
-    for a risk row that is the box clearance: epsilon = 0)."""
+    """Fallback steps of the episode certified infeasible (:func:`scenes.infeasible_step`, for a
+    risk row that is the box clearance: epsilon = 0)."""
     sc = scene.scenario(epsilon)
     count = 0
     for k in np.flatnonzero(record.fallback):
         last = np.asarray(sc.ego.initial_input) if k == 0 else record.actions[k - 1]
         measurement = (*record.object[k], sc.object.turn_rate)
-        count += infeasible_first_step(sc, record.ego[k, :3], last, np.array(measurement), agent.backoff)
+        count += infeasible_step(sc, record.ego[k, :3], last, np.array(measurement), agent.backoff)
     return count
 
 
@@ -159,6 +166,7 @@ def summarise(agent: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
     collisions = sum(r["collided"] for r in rows)
     avoidable = sum(r["avoidable"] for r in rows)
     soft = sum(r["fallback_soft"] for r in rows)
+    violations = np.concatenate([r["_violations"] for r in rows])
     manoeuvre = sum(r["fallback_manoeuvre"] for r in rows)
     return {
         "agent": agent,
@@ -180,14 +188,20 @@ def summarise(agent: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
         "solve_ms_p95": round(float(np.percentile(ms, 95)), 2),
         "solve_ms_p99": round(float(np.percentile(ms, 99)), 2),
         "solve_ms_max": round(float(ms.max()), 2),
+        "cpu_ms_max": round(float(1e3 * np.nanmax(np.concatenate([r["_cpu"] for r in rows]))), 2),
+        "soft_violation_median": round(float(np.median(violations)), 3) if violations.size else 0.0,
     }
 
 
-def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command: str, wall: float) -> str:
+def markdown(
+    summary: list[dict[str, Any]], rows: list[dict[str, Any]], command: str, wall: float, where: str
+) -> str:
     lines = [
         "# Stress benchmark: collisions, fallbacks and step times over random scenes",
         "",
         f"Command: `{command}`",
+        "",
+        f"Machine: {os.cpu_count()} cores, {where}, shared with whatever else ran (step times depend on it).",
         "",
         "Collisions: avoidable = some rate-limited open-loop manoeuvre from the start kept clear of the",
         "object's true motion for the whole episode (see `benchmarks/scenes.py`). Fallback levels as a",
@@ -195,16 +209,20 @@ def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command:
         "safest rate-limited manoeuvre. Penalty: steps whose hard calls failed but whose soft plan",
         "had zero slacks, so it solved the hard problem (the exact penalty; level (a), not a",
         "fallback). Failed calls: solver calls that did not converge (every attempt of a step).",
-        "Infeasible: fallback steps certified infeasible at n = 1 (no input within the rate limits",
-        "clears the first truncation box; for epsilon = 0, whose row is the box clearance), a share of",
-        "all steps: a fallback must act there. Capped: steps where the time cap cut a call short or left",
-        "no time for one. Step time: the whole `predict` call [ms].",
+        "Infeasible: fallback steps certified infeasible (no input sequence within the rate limits",
+        "clears the truncation box at some step n; for epsilon = 0, whose row is the box clearance), a",
+        "share of all steps: a fallback must act there. Capped: steps where the time cap cut a call",
+        "short or left no time for one. Step time: the whole `predict` call [ms] (wall time; CPU max: the",
+        "process's CPU time in the step, its own work, which the wall time exceeds when other processes",
+        "ran).",
+        "Violation: median over the soft steps of max_n s_n [m of clearance for these agents].",
         "",
         "| agent | method | eps [J] | scenes | steps | collisions (avoidable / unavoidable) |"
         " fallback % (soft / manoeuvre) | infeasible % | penalty | failed calls | capped |"
-        " p50 | p95 | p99 | max [ms] |",
-        "|" + " --- |" * 15,
+        " p50 | p95 | p99 | max [ms] | CPU max [ms] | violation |",
+        "|" + " --- |" * 17,
     ]
+    lines.insert(-2, "<!-- --8<-- [start:summary] -->")
     for s in summary:
         method, risk, eps = AGENTS[s["agent"]]
         lines.append(
@@ -213,8 +231,10 @@ def markdown(summary: list[dict[str, Any]], rows: list[dict[str, Any]], command:
             f"{s['fallback_pct']:.2f} ({s['soft_pct']:.2f} / {s['manoeuvre_pct']:.2f}) | "
             f"{'-' if s['infeasible_pct'] == '' else format(s['infeasible_pct'], '.2f')} | "
             f"{s['penalty_steps']} | {s['failed_calls']} | {s['capped_steps']} | {s['solve_ms_p50']:.1f} | "
-            f"{s['solve_ms_p95']:.1f} | {s['solve_ms_p99']:.1f} | {s['solve_ms_max']:.1f} |"
+            f"{s['solve_ms_p95']:.1f} | {s['solve_ms_p99']:.1f} | {s['solve_ms_max']:.1f} | "
+            f"{s['cpu_ms_max']:.1f} | {s['soft_violation_median']:.2f} |"
         )
+    lines.append("<!-- --8<-- [end:summary] -->")
     collided = [r for r in rows if r["collided"]]
     if collided:
         lines += [
@@ -258,15 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=Path("results"),
         help="output folder (the committed run is in docs/results/stress/)",
     )
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="",
-        default=False,
-        metavar="ADDRESS",
-        help="run on Ray (an address, or local)",
-    )
+    cli.add_sweep_options(p)
     return p
 
 
@@ -308,7 +320,9 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
             writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
             writer.writeheader()
             writer.writerows(table)
-    text = markdown(summary, rows, command.strip(), wall)
+    workers = args.workers or default_workers()
+    where = "a Ray cluster" if args.ray is not False else f"{workers} worker process(es)"
+    text = markdown(summary, rows, command.strip(), wall, where)
     (args.out / "stress.md").write_text(text)
     print(text)
     print(

@@ -189,14 +189,14 @@ def notes(rows: list[dict[str, Any]]) -> list[str]:
                 if any(r["failed_solves"] for r in sel if r["uncertainty"] == lv)
             ]
             if (method, variant) == ("RMPC", "grid"):
-                reason = "the paper's L-point grid makes its constraint a staircase; worst_case has none"
+                reason = "the grid's constraint is a staircase"
                 where = f"{DOCS}{ANCHORS['grid']}"
             else:
-                reason = "the solver did not converge (infeasible or at its iteration limit)"
+                reason = "a warm start did not converge"
                 where = FALLBACK_DOCS
             out += _wrap(
-                f"{_label(method, variant)}: {failed} failed solves ({', '.join(levels)} uncertainty) drove"
-                f" the fallback (the shifted previous plan, then braking): {reason}. {where}",
+                f"{_label(method, variant)}: {failed} failed solves ({', '.join(levels)}), soft problem"
+                f" or manoeuvre ({reason}). {where}",
                 "  ",
             )
         if method == "PPO" and len(sel) > 1:
@@ -240,8 +240,7 @@ def summary(
         lines += ["Also:", *extra]
     files = ", ".join(p.name for p in written)
     lines += _wrap(
-        f"Written to {report.parent}/: {report.name} (the tables beside the paper's, the claims' evidence,"
-        f" timing), {files}",
+        f"Written to {report.parent}/: {report.name} (beside the paper's), {files}",
         "",
     )
     return "\n".join(lines)

@@ -21,10 +21,10 @@ from risk_env.highway.adapter import (  # noqa: E402
     INTERSECTION_CONFIG,
     IDMEgo,
     IntersectionAdapter,
-    RoutePath,
     make_intersection_env,
 )
 from risk_env.highway.common import highway_scenario, policy_period, vehicle_measurement  # noqa: E402
+from risk_env.highway.route import RoutePath  # noqa: E402
 from risk_env.highway.wrapper import RiskCostWrapper  # noqa: E402
 
 __all__ = [

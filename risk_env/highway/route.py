@@ -1,4 +1,5 @@
-"""A highway-env route as a chain of our reference arcs, one per lane (:mod:`risk_env.highway.adapter`)."""
+"""The route of highway-env's controlled vehicle as our reference paths: each lane of the route
+(straight or circular) as a :class:`~risk_env.scenario.ReferencePath`, and the route's arc length."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from risk_env.path import point, project
 from risk_env.scenario import Pose, ReferencePath
 
 LaneIndex = tuple[str, str, int]
+"""highway-env's lane index ``(from node, to node, lane id)``."""
 
 
 def lane_path(lane: Any) -> ReferencePath:
