@@ -39,8 +39,10 @@ The sections of :func:`assemble`, in order:
   row holds by :data:`INACTIVE` margin units, whatever its numbers), the SMPC one row per stage on
   the sum of the slots' risks, ``sum_k active_k R_k <= epsilon``. The budget's and the weight's
   per-stage R (:data:`RiskValue`) is that sum too: by linearity of expectation the expected total
-  harm of the step. With one slot, active, all are the single-object rows bit for bit (``+ 0.0``
-  and ``1.0 *`` are exact).
+  harm of the step. A solver with one slot solves its risk variants only when the slot is active
+  (else ``"free"``), so there the flag is the constant 1, which CasADi folds away: the rows, their
+  derivatives and the solver's iterates are the single-object ones bit for bit (a parameter
+  equal to 1 would be exact in value, but its extra nodes reorder the derivatives' sums).
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
@@ -158,9 +160,10 @@ def stage_functions(
         ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", slots * Belief.SIZE)
         eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *data_shape(risk_shape, slots))
         slot_s = ca.SX.sym("slots", slots, 3)
+        numbers = slot_s if slots > 1 else ca.horzcat(ca.DM.ones(1, 1), slot_s[:, 1:])
         size = Belief.SIZE
         beliefs = [Belief.from_array(belief_s[k * size : (k + 1) * size]) for k in range(slots)]
-        rows = margin(ego_s, beliefs, eps_s, data_s, slot_s, form == "zero")
+        rows = margin(ego_s, beliefs, eps_s, data_s, numbers, form == "zero")
         # only the ego state is a variable: no derivatives for the rest (compiled code: less)
         risk = ca.Function(
             "risk",
@@ -170,7 +173,7 @@ def stage_functions(
         )
     risk_value = None
     if form != "free" and value is not None:
-        r = value(ego_s, beliefs, data_s, slot_s)
+        r = value(ego_s, beliefs, data_s, numbers)
         risk_value = ca.Function(
             "risk_value",
             [ego_s, belief_s, data_s, slot_s],
@@ -266,7 +269,7 @@ def assemble(
             q = b[k * Belief.SIZE : (k + 1) * Belief.SIZE]
             r2 = slot_numbers[k, 1] ** 2
             z2 = (x[0] - q[0]) ** 2 / (q[4] ** 2 + r2) + (x[1] - q[1]) ** 2 / (q[5] ** 2 + r2)
-            bumps.append(slot_numbers[k, 0] * ca.exp(-0.5 * z2))
+            bumps.append(ca.exp(-0.5 * z2) if slots == 1 else slot_numbers[k, 0] * ca.exp(-0.5 * z2))
         bump = bumps[0]
         for other in bumps[1:]:
             bump = ca.fmax(bump, other)
