@@ -192,7 +192,8 @@ def markdown(summary: list[dict[str, Any]], command: str, wall: float, count: in
     return "\n".join(lines) + "\n"
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.heldout``."""
     p = cli.parser("heldout", __doc__)
     p.add_argument("--scenes", type=int, default=30, help="held-out scenes per agent")
     p.add_argument("--seed", type=int, default=0, help="the generator's seed")
@@ -202,6 +203,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     )
     p.add_argument("--out", type=Path, default=Path("results/heldout"), help="output directory")
     cli.add_sweep_options(p)
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = build_parser()
     args = p.parse_args(argv)
     args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
     for a in args.agents:

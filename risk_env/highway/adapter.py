@@ -244,8 +244,6 @@ class IntersectionAdapter:
         switched = self._advance(x, y)
         scenario = self._scenario_for(self.lane)
         others = self._measure_others(rows[1:])
-        progress = self.route.progress(self.lane, x, y)
-        del progress
         nearest = np.argsort(np.hypot(others[:, 0] - x, others[:, 1] - y), kind="stable")
         self.last_objects = others[nearest[: self.slots]]
         pose = np.array([x, y, theta])
