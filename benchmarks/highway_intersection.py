@@ -37,6 +37,7 @@ from __future__ import annotations
 import argparse
 import csv
 import functools
+import os
 import sys
 import time
 from pathlib import Path
@@ -82,6 +83,8 @@ def make_driver(spec: str, env: Any, args: argparse.Namespace) -> Any:
     if name == "idm":
         return IDMEgo(env)
     factory = RMPC if name == "rmpc" else functools.partial(SMPC, risk="exact")
+    if args.max_solve_time is not None:
+        factory = functools.partial(factory, max_solve_time=args.max_solve_time)
     return IntersectionAdapter(
         env,
         factory,
@@ -160,7 +163,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
 def run_chunk(job: tuple[str, list[int], argparse.Namespace]) -> list[dict[str, Any]]:
     """Episodes ``seeds`` of agent ``spec`` (a pool job; the env and driver kept per process)."""
     spec, seeds, args = job
-    key = (spec, args.env, args.uncertainty, args.severity, args.tolerance, args.slots)
+    key = (spec, args.env, args.uncertainty, args.severity, args.tolerance, args.slots, args.max_solve_time)
     if key not in _CACHE:
         from risk_env.highway import RiskCostWrapper, make_intersection_env
         from risk_env.highway.adapter import ADAPTER_DEFAULTS
@@ -230,13 +233,18 @@ def _f(x: float, digits: int = 1) -> str:
 
 def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: float, command: str) -> str:
     """The summary as a Markdown table with its settings and command."""
+    cap = "20 % of T (the default)" if args.max_solve_time is None else f"{args.max_solve_time:g} s"
+    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
     lines = [
         f"`{command}`",
         "",
         f"{args.env} (INTERSECTION_CONFIG), seeds {args.seed}..{args.seed + args.episodes - 1}"
         f" (N = {args.episodes} per agent), uncertainty {args.uncertainty}, {args.slots} object slots;"
         f" risk scored by RiskCostWrapper (exact, severity {args.severity}). Wall time {wall:.0f} s"
-        f" on {args.workers or 'all'} worker(s). Collisions: % [Wilson 95 % interval].",
+        f" on {args.workers or 'all'} worker(s); the MPCs' wall-time cap per step: {cap}; the machine's"
+        f" load average at the end (1 / 5 / 15 min): {load} on {os.cpu_count()} cores (solve times are"
+        " wall times: other processes on the machine lengthen them). Collisions: % [Wilson 95 %"
+        " interval].",
         "",
         "| agent | N | collisions | ego drove into a vehicle | a vehicle drove into the ego | goal |"
         " timeout | time to goal [s] | fallbacks (episodes with any) | solve ms median / p95 / max |"
@@ -281,6 +289,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="Table I level")
     parser.add_argument("--severity", choices=SEVERITY_NAMES, default="probability", help="severity model")
     parser.add_argument("--tolerance", type=float, default=0.01, help="epsilon [units of the severity]")
+    parser.add_argument(
+        "--max-solve-time",
+        type=float,
+        default=None,
+        help="the MPCs' wall-time cap per step [s] (default: theirs, 20 %% of T; inf: none, results"
+        " independent of the machine's load)",
+    )
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     parser.add_argument("--out", type=Path, default=Path("results/highway"), help="output folder")
     return parser
