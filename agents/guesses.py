@@ -99,9 +99,12 @@ def initial_point(
     cost, g = problem.evaluate(w, p)
     cost, g = float(cost), np.asarray(g).ravel()
     if problem.slack_index.size:  # the slacks where the rows fall short
+        # a slack may be shared by several rows (a stage's, one per object slot): their largest
         shortfall = np.maximum(lbg[problem.risk_rows] - g[problem.risk_rows], 0.0)
-        w[problem.slack_index] = shortfall + SLACK_PUSH
-        g[problem.risk_rows] += shortfall + SLACK_PUSH
+        per_slack = np.zeros(problem.slack_index.size)
+        np.maximum.at(per_slack, problem.row_slack, shortfall)
+        w[problem.slack_index] = per_slack + SLACK_PUSH
+        g[problem.risk_rows] += per_slack[problem.row_slack] + SLACK_PUSH
         cost = float(problem.evaluate(w, p)[0])
     violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
     return w, violation, cost

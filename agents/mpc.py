@@ -23,7 +23,6 @@ import functools
 import gc
 import math
 import os
-import warnings
 from typing import Any, ClassVar
 
 import casadi as ca
@@ -31,7 +30,8 @@ import numpy as np
 
 from agents.base import SolveReport, as_batch
 from agents.budget import Budget
-from agents.ocp import STAGE_COSTS, problem_key, soft_variant
+from agents.objects import check_slots, combine, slot_scenario
+from agents.ocp import STAGE_COSTS, problem_key, slot_numbers, soft_variant
 from agents.solver import (
     DEFAULT_JIT_CACHE,
     SOLVERS,
@@ -46,7 +46,7 @@ from risk_env import observation as ob
 from risk_env.ops import NUMPY
 from risk_env.path import point
 from risk_env.prediction import Belief
-from risk_env.risk import WorstCaseRisk, signed_box_distance
+from risk_env.risk import RiskEstimator, WorstCaseRisk, signed_box_distance
 from risk_env.scenario import Scenario
 
 __all__ = ["FEASIBLE_SLACK", "FREE_MARGIN", "SOFT_SHARE", "SOLVERS", "STAGE_COSTS", "PathFollowingMPC"]
@@ -60,10 +60,6 @@ RUNGS = 6
 to 4 by default) or time (IPOPT) limit."""
 SOFT_PENALTY = 1e4
 """Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
-PLANS_AGAINST_ONE = (
-    "this MPC plans against the first present object of its observation only; the scenario's other"
-    " objects carry no risk constraint (issue 10, items 4-5)"
-)
 
 
 class PathFollowingMPC:
@@ -139,6 +135,11 @@ class PathFollowingMPC:
         solver_options: extra nlpsol options; ``{"ipopt": {...}}`` / ``{"fatrop": {...}}`` update
             the plugin's own options.
         seed: seed of the agent's generator (Monte Carlo draws).
+        object_slots: K, the object slots of the observations it reads (None: the scenario's
+            number of objects; match the env's ``object_slots``). One solver with K slots plans
+            against every present object (:mod:`agents.objects`); slot k takes object k's radius,
+            mass and uncertainty, slots beyond the scenario's objects the last object's. An
+            observation with another slot count raises ``ValueError`` naming both.
     """
 
     risk_method: str = ""
@@ -165,6 +166,7 @@ class PathFollowingMPC:
         seed: int | None = 0,
         max_solve_time: float | None = None,
         soft_penalty: float = SOFT_PENALTY,
+        object_slots: int | None = None,
     ) -> None:
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env Scenario, got {type(scenario).__name__}")
@@ -178,8 +180,14 @@ class PathFollowingMPC:
         self.max_solve_time = float(cap)
         """The wall-time cap of one step [s]."""
         self.scenario = scenario
-        if len(scenario.objects) > 1:
-            warnings.warn(PLANS_AGAINST_ONE, stacklevel=2)
+        self.slots = check_slots(object_slots, scenario)
+        """K, the object slots (fixed at construction)."""
+        self._numbers = slot_numbers(scenario, self.slots)
+        slot_scenarios = [slot_scenario(scenario, k) for k in range(self.slots)]
+        self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in slot_scenarios)
+        """Each slot's risk estimator (its radius, mass and uncertainty)."""
+        self.estimator = self.estimators[0]
+        self._worsts = tuple(WorstCaseRisk(s) for s in slot_scenarios)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
         self.settings = SolverSettings(
             solver=solver,
@@ -206,7 +214,6 @@ class PathFollowingMPC:
         self._memory: dict[int, dict[str, Any]] = {}
         self._problems: dict[str, Problem] = {}
         self._maps: dict[tuple[str, str, str], np.ndarray] = {}
-        self._worst = WorstCaseRisk(scenario)
         self._manoeuvre_time = MANOEUVRE_TIME
         ego, dt = scenario.ego, scenario.dt
         self._speed_cap = max(abs(ego.v_min), abs(ego.v_max))
@@ -268,13 +275,14 @@ class PathFollowingMPC:
     ) -> tuple[np.ndarray, None]:
         """SB3's predictor protocol: float32 action(s) (v [m/s], omega [rad/s]) and no state.
 
-        ``observation``: one ``(10 + 6 K,)`` (K slots: the scenario's objects) or a batch ``(B, 10 + 6 K)``,
-        each solved in turn with its own warm start (by batch index); the plan respects the first
-        present object's risk bound. ``episode_start`` (bool or ``(B,)``) drops the warm start;
+        ``observation``: one ``(10 + 6 K,)`` (K: :attr:`slots`) or a batch ``(B, 10 + 6 K)``,
+        each solved in turn with its own warm start (by batch index); the plan respects every
+        present object's risk bound (an observation with another slot count:
+        ``ValueError``). ``episode_start`` (bool or ``(B,)``) drops the warm start;
         so does a new episode detected from the observation (its last applied input is not the
         action returned, or the ego is over 1 m from where the plan put it).
         """
-        obs, single = as_batch(observation, ob.size(len(self.scenario.objects)))
+        obs, single = as_batch(observation, ob.size(self.slots))
         starts = np.zeros(len(obs), dtype=bool)
         if episode_start is not None:
             flags = np.asarray(episode_start, dtype=bool).reshape(-1)
@@ -300,13 +308,20 @@ class PathFollowingMPC:
         """What, besides the scenario and the solver settings, changes the built problem."""
         raise NotImplementedError
 
+    def _estimator(self, scenario: Scenario) -> RiskEstimator:
+        """The agent's estimator for one slot's single-object ``scenario``."""
+        raise NotImplementedError
+
     def _risk_parameter_shape(self) -> tuple[int, int]:
         """Shape of the per-step risk data parameter ((0, 0): none)."""
         return (0, 0)
 
-    def _margin(self, ego: ca.SX, belief: Belief, epsilon: ca.SX, data: ca.SX, zero: bool) -> ca.SX:
-        """Symbolic constraint, >= 0 iff the risk bound holds at this step; ``zero``: the form for
-        epsilon = 0 (only with :attr:`ZERO_TOLERANCE_VARIANT`)."""
+    def _margin(
+        self, ego: ca.SX, beliefs: list[Belief], epsilon: ca.SX, data: ca.SX, numbers: ca.SX, zero: bool
+    ) -> ca.SX:
+        """Symbolic rows of one stage (:data:`agents.ocp.Margin`), each >= 0 iff the risk bound
+        holds at this step for every active slot; ``zero``: the form for epsilon = 0 (only with
+        :attr:`ZERO_TOLERANCE_VARIANT`)."""
         raise NotImplementedError
 
     def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
@@ -314,21 +329,35 @@ class PathFollowingMPC:
         the solver iterations that took; None: start from the rollouts."""
         return None
 
-    def _risk_data(self, beliefs: Belief) -> np.ndarray:
-        """Per-step risk data ``(N, *shape)`` for one solve (Monte Carlo: fresh draws)."""
+    def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
+        """Per-step risk data ``(N, K J, 3)`` for one solve, the slots' blocks stacked (Monte
+        Carlo: fresh draws for the present slots, zeros for the absent ones)."""
         return np.zeros((self.horizon, 0, 0))
 
-    def _risk_numpy(self, ego: np.ndarray, beliefs: Belief, data: np.ndarray) -> np.ndarray:
-        """Risk ``(N,)`` of ego states ``(N, 4)`` against the beliefs at n = 1..N."""
+    def _slot_risk(self, slot: int, ego: np.ndarray, belief: Belief, data: np.ndarray) -> np.ndarray:
+        """Slot ``slot``'s risk ``(N,)`` of ego states ``(N, 4)`` against its beliefs at n = 1..N
+        (``data``: its block ``(N, J, 3)``)."""
         raise NotImplementedError
+
+    def _risk_numpy(self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray) -> np.ndarray:
+        """Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present slots (``futures[k]``
+        not None) of their risks at n = 1..N; zeros when no object is present."""
+        rows = data.shape[1] // self.slots if data.size else 0
+        terms = [
+            self._slot_risk(k, ego, f, data[:, k * rows : (k + 1) * rows])
+            for k, f in enumerate(futures)
+            if f is not None
+        ]
+        return combine(terms) if terms else np.zeros(np.shape(ego)[:-1])
 
     def _risk_terms(self) -> tuple[bool, bool]:
         """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
         risk in its objective (:mod:`agents.risk_budget`); neither by default."""
         return (False, False)
 
-    def _risk_value(self, ego: ca.SX, belief: Belief, data: ca.SX) -> ca.SX:
-        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`)."""
+    def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
+        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`): the
+        sum over the active slots (:data:`agents.ocp.RiskValue`)."""
         raise NotImplementedError
 
     def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
@@ -345,7 +374,8 @@ class PathFollowingMPC:
             key = (
                 type(self).__name__,
                 variant,
-                problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty: parameters
+                problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty, objects: parameters
+                self.slots,
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
                 self._risk_terms(),
@@ -359,6 +389,7 @@ class PathFollowingMPC:
                 self._risk_parameter_shape(),
                 self._risk_value if any(self._risk_terms()) else None,
                 self._risk_terms(),
+                self.slots,
             )
             self._problems[variant] = cached_problem(key, build)
         return self._problems[variant]
@@ -376,10 +407,11 @@ class PathFollowingMPC:
         speeds = np.minimum(self._speed_cap, abs(v_last) + self._dv * np.arange(1, self.horizon + 1))
         return np.cumsum(speeds) * self.scenario.dt
 
-    def _risk_possible(self, x0: np.ndarray, future: Belief) -> bool:
-        """Whether some step's risk could be nonzero where the ego can reach (else: ``"free"``)."""
+    def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:
+        """Whether some step's risk of slot ``slot``'s object could be nonzero where the ego can
+        reach (else the slot is inactive; no active slot: ``"free"``)."""
         distance = signed_box_distance(x0[0] - future.x, x0[1] - future.y, future.half_x, future.half_y)
-        spare = distance - self._reach(x0[4]) - self.scenario.collision_distance
+        spare = distance - self._reach(x0[4]) - float(self._numbers[slot, 0])
         return bool(np.any(spare <= FREE_MARGIN))
 
     def _call(
@@ -389,7 +421,7 @@ class PathFollowingMPC:
         return call_solver(pr, args, self.settings.solver, rung)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
-        """One step for the observation ``obs_vec`` (15,) of batch entry ``index``
+        """One step for the observation ``obs_vec`` (10 + 6 K,) of batch entry ``index``
         (:class:`agents.step.Step`), within the wall-time cap."""
         collecting = gc.isenabled()
         gc.disable()  # no garbage-collection pause inside the step: it runs between steps

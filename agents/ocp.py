@@ -25,11 +25,24 @@ The sections of :func:`assemble`, in order:
   the agent's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
   with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
   step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``): the object measurement (c1, c2, theta, v, omega), epsilon, v_ref,
-  the numbers of the scenario's :class:`~risk_env.scenario.Uncertainty` (sigma0, growths, box,
-  speed bounds) and the agent's risk data (Monte Carlo draws). Agents that differ only in their
-  tolerance, reference speed, uncertainty level or start share one built (or compiled) solver
-  (:func:`problem_key`).
+- **Parameters** (nlpsol ``p``, :func:`parameter_vector`): epsilon, v_ref, then per object slot
+  k = 0..K-1 (:data:`SLOT_SIZE` numbers): its measurement (c1, c2, theta, v, omega), ``active``
+  (1: the object is present and may reach the ego within the horizon, 0: its rows cost nothing),
+  its collision distance r_e + r_o [m], its mass m_o [kg] (for the severity) and the numbers of
+  its :class:`~risk_env.scenario.Uncertainty` (:func:`uncertainty_vector`); then the agent's risk
+  data per stage (Monte Carlo draws, every slot's); last, with the episode budget or the risk
+  weight, the :data:`TERMS` numbers. Agents that differ only in their tolerance, reference speed,
+  uncertainty level, start or objects share one built (or compiled) solver (:func:`problem_key`),
+  and a solver with K slots serves every scene with up to K objects without a rebuild.
+- **Risk rows of many objects** (:data:`Margin`): the agent's margin returns the rows of one stage
+  for all K slots: the RMPC one row per slot (``margin_k + BIG (1 - active_k)``: an inactive slot's
+  row holds by :data:`INACTIVE` margin units, whatever its numbers), the SMPC one row per stage on
+  the sum of the slots' risks, ``sum_k active_k R_k <= epsilon``. The budget's and the weight's
+  per-stage R (:data:`RiskValue`) is that sum too: by linearity of expectation the expected total
+  harm of the step. A solver with one slot solves its risk variants only when the slot is active
+  (else ``"free"``), so there the flag is the constant 1, which CasADi folds away: the rows, their
+  derivatives and the solver's iterates are the single-object ones bit for bit (a parameter
+  equal to 1 would be exact in value, but its extra nodes reorder the derivatives' sums).
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
   form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
@@ -82,13 +95,20 @@ NX = 6
 NU = 3
 """Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
 
+SLOT_SIZE = 5 + 3 + 13
+"""Parameters per object slot: measurement (5), active, collision distance [m], mass [kg],
+uncertainty numbers (13)."""
+INACTIVE = 1e3
+"""Margin units added to an inactive slot's rows (so they hold, whatever the slot's numbers)."""
+Margin = Callable[[ca.SX, list[Belief], ca.SX, ca.SX, ca.SX, bool], ca.SX]
+"""``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
+collision distance [m], mass [kg], zero) -> rows``: every row >= 0 iff the step's risk bound holds."""
 TERMS = 5
 """Parameters of the risk terms (:mod:`agents.risk_budget`), at the end of p: the budget B, the risk
 spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
-Margin = Callable[[ca.SX, Belief, ca.SX, ca.SX, bool], ca.SX]
-"""``(ego (4,), belief, epsilon, risk data, zero) -> margin``: >= 0 iff the step's risk bound holds."""
-RiskValue = Callable[[ca.SX, Belief, ca.SX], ca.SX]
-"""``(ego (4,), belief, risk data) -> R``: the agent's per-stage risk (the budget's and the cost's)."""
+RiskValue = Callable[[ca.SX, list[Belief], ca.SX, ca.SX], ca.SX]
+"""``(ego (4,), beliefs (one per slot), risk data (K J, 3), slot numbers (K, 3)) -> R``: the agent's
+per-stage risk summed over the active slots (the budget's and the cost's)."""
 Layout = tuple[list[tuple[int, str, int]], list[tuple[int, str, int]], list[float], list[float]]
 """``(w_tags, g_tags, lbg, ubg)``: (stage, kind, component) of every variable and row, row bounds."""
 
@@ -108,17 +128,23 @@ def soft_variant(variant: str) -> str:
     return form + SOFT
 
 
+def data_shape(risk_shape: tuple[int, int], slots: int) -> tuple[int, int]:
+    """Shape of one stage's risk data parameter: every slot's ``risk_shape`` rows stacked."""
+    return (risk_shape[0] * slots, risk_shape[1]) if risk_shape[0] else (0, 0)
+
+
 def stage_functions(
     scenario: Scenario,
     variant: str,
     margin: Margin,
     risk_shape: tuple[int, int],
     value: RiskValue | None = None,
+    slots: int = 1,
 ) -> dict[str, ca.Function | None]:
     """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, belief, epsilon, data) -> margin
-    (None for ``"free"``) and, with ``value``, ``risk_value`` (ego, belief, data) -> R (None for
-    ``"free"`` or without ``value``)."""
+    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, beliefs (K, 11), epsilon, data,
+    slot numbers (K, 3)) -> rows (None for ``"free"``) and, with ``value``, ``risk_value`` (ego,
+    beliefs, data, slot numbers) -> R (None for ``"free"`` or without ``value``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
     w_c1, w_c2, w_th, _ = sc.cost_weights
@@ -131,18 +157,28 @@ def stage_functions(
     risk = None
     form = risk_form(variant)
     if form != "free":
-        ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", Belief.SIZE)
-        eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *risk_shape)
-        row = margin(ego_s, Belief.from_array(belief_s), eps_s, data_s, form == "zero")
+        ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", slots * Belief.SIZE)
+        eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *data_shape(risk_shape, slots))
+        slot_s = ca.SX.sym("slots", slots, 3)
+        numbers = slot_s if slots > 1 else ca.horzcat(ca.DM.ones(1, 1), slot_s[:, 1:])
+        size = Belief.SIZE
+        beliefs = [Belief.from_array(belief_s[k * size : (k + 1) * size]) for k in range(slots)]
+        rows = margin(ego_s, beliefs, eps_s, data_s, numbers, form == "zero")
         # only the ego state is a variable: no derivatives for the rest (compiled code: less)
         risk = ca.Function(
-            "risk", [ego_s, belief_s, eps_s, data_s], [row], {"is_diff_in": [True, False, False, False]}
+            "risk",
+            [ego_s, belief_s, eps_s, data_s, slot_s],
+            [rows],
+            {"is_diff_in": [True, False, False, False, False]},
         )
     risk_value = None
     if form != "free" and value is not None:
-        r = value(ego_s, Belief.from_array(belief_s), data_s)
+        r = value(ego_s, beliefs, data_s, numbers)
         risk_value = ca.Function(
-            "risk_value", [ego_s, belief_s, data_s], [r], {"is_diff_in": [True, False, False]}
+            "risk_value",
+            [ego_s, belief_s, data_s, slot_s],
+            [r],
+            {"is_diff_in": [True, False, False, False]},
         )
     return {"f": f, "pose_cost": pose_cost, "risk": risk, "risk_value": risk_value}
 
@@ -155,34 +191,43 @@ def assemble(
     stage_cost: str,
     soft_penalty: float | None = None,
     terms: tuple[bool, bool] = (False, False),
+    slots: int = 1,
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
-    called), its :data:`Layout` and the beliefs' function (object measurement (5,), uncertainty
-    numbers) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho: soften the risk rows with slacks
-    (tagged ``(n, "s", 0)``) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight):
-    the :data:`TERMS` parameters at the end of p, and (with a ``risk_value`` stage function) the
-    episode budget's accumulator and row, the weighted risk in the objective (see the module)."""
+    called) for ``slots`` object slots, its :data:`Layout` and one object's beliefs' function
+    (measurement (5,), uncertainty numbers (13,)) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho:
+    soften the risk rows with slacks (one per stage, tagged ``(n, "s", 0)``, shared by the stage's
+    rows) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight): the :data:`TERMS`
+    parameters at the end of p, and (with a ``risk_value`` stage function) the episode budget's
+    accumulator and row, the weighted risk in the objective (see the module)."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
     dv, dw = ego.accel_max * sc.dt, ego.omega_rate_max * sc.dt
     f, pose_cost, risk = stages["f"], stages["pose_cost"], stages["risk"]
 
-    # --- parameters: object measurement, epsilon, the uncertainty's numbers (so that the levels
-    # share one solver), per-step risk data; the object's beliefs
-    p_obj = sym.sym("object", 5)
+    # --- parameters (parameter_vector's layout): epsilon; per slot its measurement, active flag,
+    # collision distance, mass and uncertainty numbers; per-step risk data; the slots' beliefs
+    n_unc = len(_UNCERTAINTY_ORDER)
     p_eps = sym.sym("epsilon")
     p_vref = sym.sym("v_ref")
-    p_unc = sym.sym("uncertainty", len(uncertainty_vector(sc)))
-    p_data = [sym.sym(f"risk_data_{n}", *risk_shape) for n in range(1, N + 1)]
+    p_slots = [sym.sym(f"slot_{k}", SLOT_SIZE) for k in range(slots)]
+    p_data = [sym.sym(f"risk_data_{n}", *data_shape(risk_shape, slots)) for n in range(1, N + 1)]
     with_terms = any(terms)
     p_terms = sym.sym("risk_terms", TERMS) if with_terms else None
     extra = [p_terms] if with_terms else []
-    p = ca.vertcat(p_obj, p_eps, p_vref, p_unc, *(ca.vec(d) for d in p_data), *extra)
-    beliefs = predict(sc, p_obj, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(p_unc))
+    p = ca.vertcat(p_eps, p_vref, *p_slots, *(ca.vec(d) for d in p_data), *extra)
+    slot_numbers = ca.horzcat(*(q[5:8] for q in p_slots)).T  # (K, 3): active, distance, mass
     fields = [f.name for f in dataclasses.fields(Belief)]
-    stacked = [ca.vertcat(*(getattr(b, k) for k in fields)) for b in beliefs]
-    belief_fn = ca.Function("beliefs", [p_obj, p_unc], [ca.horzcat(*stacked).T])
+
+    def stack(measurement: Any, numbers: Any) -> list[Any]:
+        bs = predict(sc, measurement, steps=N, ops=CASADI, uncertainty=symbolic_uncertainty(numbers))
+        return [ca.vertcat(*(getattr(b, k) for k in fields)) for b in bs]
+
+    per_slot = [stack(q[0:5], q[8 : 8 + n_unc]) for q in p_slots]
+    stacked = [ca.vertcat(*(b[n] for b in per_slot)) for n in range(N + 1)]
+    q_obj, q_unc = sym.sym("object", 5), sym.sym("uncertainty", n_unc)
+    belief_fn = ca.Function("beliefs", [q_obj, q_unc], [ca.horzcat(*stack(q_obj, q_unc)).T])
 
     # --- variables, stage by stage: x_0, u_0, x_1, u_1, ..., x_N
     X = [sym.sym(f"x_{n}", NX) for n in range(N + 1)]
@@ -213,29 +258,37 @@ def assemble(
 
     values = {}
     if C or weight is not None:
-        values = {n: value(ego_at(n), stacked[n], p_data[n - 1]) for n in range(1, N + 1)}
+        values = {n: value(ego_at(n), stacked[n], p_data[n - 1], slot_numbers) for n in range(1, N + 1)}
+
+    def near_weight(x: Any, b: Any) -> Any:
+        """A slack costs more where an object is likelier: 1 + NEAR_WEIGHT times the largest, over
+        the active slots, of a Gaussian bump at the slot's predicted mean (its belief's spread
+        widened by its r_e + r_o); >= 1, so the penalty stays exact."""
+        bumps = []
+        for k in range(slots):
+            q = b[k * Belief.SIZE : (k + 1) * Belief.SIZE]
+            r2 = slot_numbers[k, 1] ** 2
+            z2 = (x[0] - q[0]) ** 2 / (q[4] ** 2 + r2) + (x[1] - q[1]) ** 2 / (q[5] ** 2 + r2)
+            bumps.append(ca.exp(-0.5 * z2) if slots == 1 else slot_numbers[k, 0] * ca.exp(-0.5 * z2))
+        bump = bumps[0]
+        for other in bumps[1:]:
+            bump = ca.fmax(bump, other)
+        return 1.0 + NEAR_WEIGHT * bump
 
     def add_risk(n: int) -> Any:
         """The risk row of state n (its slack added in a soft variant), at n = N the budget row;
         their cost terms."""
         if risk is None:
             return 0.0
-        row = risk(ego_at(n), stacked[n], p_eps, p_data[n - 1])
+        row = risk(ego_at(n), stacked[n], p_eps, p_data[n - 1], slot_numbers)
         cost = 0.0 if weight is None else weight * values[n]
         if soft:
             row = row + S[n]
-            # a violation costs more where the object is likelier (near its predicted mean, at the
-            # belief's spread widened by r_e + r_o): where the boxes cannot be kept off, the plan
-            # misses them where the object is least expected; the weight stays >= rho_n (exact)
-            b = stacked[n]
-            r2 = sc.collision_distance**2
-            z2 = (X[n][0] - b[0]) ** 2 / (b[4] ** 2 + r2) + (X[n][1] - b[1]) ** 2 / (b[5] ** 2 + r2)
-            near = 1.0 + NEAR_WEIGHT * ca.exp(-0.5 * z2)
-            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near * S[n]
+            cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near_weight(X[n], stacked[n]) * S[n]
         add_g(row, 0.0, math.inf, n, "risk")
         if C and n == N:  # (B - spent - sum_n R_n) * normaliser + switch-off >= backoff
             left = (p_terms[0] - p_terms[1] - C[N] - values[N]) * p_terms[2] + p_terms[3]
-            add_g(left + s_budget if soft else left, 0.0, math.inf, N, "risk")
+            add_g(left + s_budget if soft else left, 0.0, math.inf, N, "budget")
             cost += soft_penalty * s_budget if soft else 0.0
         return cost
 
@@ -307,10 +360,48 @@ _UNCERTAINTY_FIELDS = (
 )
 
 
-def uncertainty_vector(scenario: Scenario) -> np.ndarray:
-    """The scenario's :class:`~risk_env.scenario.Uncertainty` as the solver's parameter vector (13,)."""
-    u = scenario.uncertainty
+_UNCERTAINTY_ORDER = tuple(f"{name}[{i}]" for name, length in _UNCERTAINTY_FIELDS for i in range(length))
+
+
+def uncertainty_vector(scenario: Scenario, index: int = 0) -> np.ndarray:
+    """Object ``index``'s :class:`~risk_env.scenario.Uncertainty` (the first object's by default)
+    as the solver's parameter vector (13,)."""
+    u = scenario.uncertainties[index]
     return np.concatenate([np.asarray(getattr(u, name), float) for name, _ in _UNCERTAINTY_FIELDS])
+
+
+def slot_numbers(scenario: Scenario, slots: int) -> np.ndarray:
+    """The fixed numbers of each slot ``(K, 2 + 13)``: collision distance r_e + r_o [m], mass m_o
+    [kg] and uncertainty numbers; slot k takes object k's, the slots beyond the scenario's
+    objects the last object's."""
+    out = []
+    for k in range(slots):
+        i = min(k, len(scenario.objects) - 1)
+        obj = scenario.objects[i]
+        out.append([scenario.collision_distances[i], obj.mass, *uncertainty_vector(scenario, i)])
+    return np.array(out, dtype=float)
+
+
+def parameter_vector(
+    epsilon: float,
+    v_ref: float,
+    measurements: np.ndarray,
+    active: np.ndarray,
+    numbers: np.ndarray,
+    data: np.ndarray,
+    terms: np.ndarray | None = None,
+) -> np.ndarray:
+    """The solver's ``p``, the one layout of the module: epsilon, v_ref [m/s], per slot k its
+    measurement ``measurements[k]`` (5,), its ``active[k]`` flag and its ``numbers[k]``
+    (:func:`slot_numbers`: r_e + r_o, m_o, uncertainty (13,)), together :data:`SLOT_SIZE`; then
+    the per-stage risk data ``(N, K J, 3)`` (each stage's matrix column by column); last the
+    :data:`TERMS` numbers (``terms``; empty or None without a budget or weight)."""
+    blocks = [
+        np.concatenate([m, [float(a)], n[:2], n[2:]])
+        for m, a, n in zip(measurements, active, numbers, strict=True)
+    ]
+    tail = np.zeros(0) if terms is None else np.asarray(terms, float)
+    return np.concatenate([[epsilon, v_ref], *blocks, *(d.ravel(order="F") for d in data), tail])
 
 
 def symbolic_uncertainty(p: Any) -> SimpleNamespace:
@@ -325,12 +416,12 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
     """What of the scenario is built into a solver: all but the parameters (epsilon, v_ref, the
-    uncertainty) and what the NLP never sees (the starts and the objects' inputs, measured at each
-    step; the episode's step limit)."""
+    uncertainty, every object's numbers: each slot's are parameters) and what the NLP never sees
+    (the ego's start and initial input, measured at each step; the episode's step limit). The
+    slot count is the agent's, keyed beside this."""
     rest = max(scenario.ego.v_min, 0.0)  # a valid v_ref and input for every ego
     ego = dataclasses.replace(scenario.ego, start=PARKED, v_ref=rest, initial_input=(rest, 0.0))
-    objects = tuple(dataclasses.replace(o, start=PARKED, speed=0.0, turn_rate=0.0) for o in scenario.objects)
     skip = ("risk_tolerance", "uncertainty", "max_steps", "ego", "objects")
     fields = dataclasses.fields(scenario)
     kept = tuple((f.name, getattr(scenario, f.name)) for f in fields if f.name not in skip)
-    return (("ego", ego), ("objects", objects), *kept)
+    return (("ego", ego), *kept)

@@ -8,8 +8,10 @@ import casadi as ca
 import numpy as np
 
 from agents.mpc import PathFollowingMPC
+from agents.objects import symbolic
+from agents.ocp import INACTIVE
 from risk_env.prediction import Belief
-from risk_env.risk import WorstCaseRisk
+from risk_env.risk import RiskEstimator, WorstCaseRisk
 from risk_env.scenario import Scenario
 
 
@@ -19,7 +21,9 @@ class RMPC(PathFollowingMPC):
     ``risk="worst_case"`` (default) uses the exact box form of
     :class:`risk_env.risk.WorstCaseRisk`: ``max(clearance, (epsilon - s_worst)/scale) >= 0`` with
     clearance = signed distance from the ego centre to the object's truncation box minus
-    ``r_e + r_o``; a tolerance above the worst severity over the speed interval relaxes it (with the
+    ``r_e + r_o``, one row per object slot and stage (every object's worst case excluded; an
+    inactive slot's row is lifted by :data:`agents.ocp.INACTIVE`); a
+    tolerance above the worst severity over the speed interval relaxes it (with the
     paper's severity and a speed interval containing 0 that takes epsilon >= 6250 J, so the paper's
     RMPC ignores epsilon). ``risk="grid"`` is the paper's L-point grid under-approximation
     (L = ``grid_points`` or the scenario's). Both are piecewise smooth (``fmax``); IPOPT copes.
@@ -48,18 +52,28 @@ class RMPC(PathFollowingMPC):
         if risk not in self.RISK_METHODS:
             raise ValueError(f"unknown RMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
         self.risk_method = risk
-        self.estimator = WorstCaseRisk(scenario, grid=(risk == "grid"), grid_points=grid_points)
+        self.grid_points = grid_points
         super().__init__(scenario, **kwargs)
+
+    def _estimator(self, scenario: Scenario) -> RiskEstimator:
+        return WorstCaseRisk(scenario, grid=(self.risk_method == "grid"), grid_points=self.grid_points)
 
     def _estimator_key(self) -> tuple[Any, ...]:
         return (self.risk_method, self.estimator.grid_points)
 
-    def _margin(self, ego: ca.SX, belief: Belief, epsilon: ca.SX, data: ca.SX, zero: bool) -> ca.SX:
-        return self.estimator.casadi_margin(ego, belief, epsilon)
+    def _margin(
+        self, ego: ca.SX, beliefs: list[Belief], epsilon: ca.SX, data: ca.SX, numbers: ca.SX, zero: bool
+    ) -> ca.SX:
+        rows = []
+        for k, belief in enumerate(beliefs):
+            est = symbolic(self.estimators[k], numbers[k, 1], numbers[k, 2])
+            rows.append(est.casadi_margin(ego, belief, epsilon) + INACTIVE * (1.0 - numbers[k, 0]))
+        return ca.vertcat(*rows)
 
-    def _risk_numpy(self, ego: np.ndarray, beliefs: Belief, data: np.ndarray) -> np.ndarray:
-        return self.estimator.risk(ego, beliefs)
+    def _slot_risk(self, slot: int, ego: np.ndarray, belief: Belief, data: np.ndarray) -> np.ndarray:
+        return self.estimators[slot].risk(ego, belief)
 
     def clearance(self, ego: np.ndarray, beliefs: Belief) -> np.ndarray:
-        """Distance [m] from ego centres ``(N, 4)`` to the truncation boxes minus r_e + r_o."""
+        """Distance [m] from ego centres ``(N, 4)`` to the first slot's truncation boxes minus
+        r_e + r_o."""
         return self.estimator.distance(ego, beliefs) - self.estimator.radius

@@ -11,9 +11,11 @@ import numpy as np
 from agents import risk_budget as rb
 from agents.base import SolveReport
 from agents.mpc import PathFollowingMPC
+from agents.objects import slot_rows, symbolic
+from agents.ocp import INACTIVE
 from risk_env.ops import CASADI
 from risk_env.prediction import Belief
-from risk_env.risk import ExactRisk, MonteCarloRisk, WorstCaseRisk
+from risk_env.risk import ExactRisk, MonteCarloRisk, RiskEstimator
 from risk_env.scenario import Scenario
 
 CLEARANCE_SOFTNESS = 0.05
@@ -65,6 +67,12 @@ class SMPC(PathFollowingMPC):
     from the pilot's plan: about a third of the cost of three full cold solves. ``pilot_samples=None``
     solves the full problem from every rollout.
 
+    **Many objects** (K slots, :mod:`agents.objects`): one row per stage on the sum of the active
+    slots' risks, ``sum_k R_k <= epsilon`` (the expected total harm of the step), written
+    ``max(min_k clearance_k, (epsilon - sum_k R_k)/scale) >= backoff`` (each inactive slot's
+    clearance lifted by :data:`agents.ocp.INACTIVE`, its R times 0); at epsilon = 0 one clearance
+    row per slot. With one slot these are the single-object rows exactly.
+
     **Episode risk budget and risk weight** (:mod:`agents.risk_budget`, where the guarantee and its
     assumptions are written out): ``risk_budget=B`` asks every plan for spent + sum_n R_{n|k} <= B,
     spent being the risk of the steps already taken (:meth:`spent_risk`), so that an episode
@@ -109,17 +117,12 @@ class SMPC(PathFollowingMPC):
         self.risk_method = risk
         self.pilot_samples = pilot_samples
         self._pilot: SMPC | None = None
-        self._box = WorstCaseRisk(scenario)
-        if risk == "exact":
-            self.estimator = ExactRisk(scenario)
-        else:
-            self.estimator = MonteCarloRisk(
-                scenario,
-                samples=samples,
-                bandwidth=bandwidth,
-                smoothing=smoothing,
-                severity_smoothing=severity_smoothing,
-            )
+        self._options = {
+            "samples": samples,
+            "bandwidth": bandwidth,
+            "smoothing": smoothing,
+            "severity_smoothing": severity_smoothing,
+        }
         super().__init__(scenario, **kwargs)
         if risk == "monte_carlo" and pilot_samples and pilot_samples < self.estimator.samples:
             est = self.estimator
@@ -137,6 +140,11 @@ class SMPC(PathFollowingMPC):
                 **options,
             )
             self.build_time += self._pilot.build_time
+
+    def _estimator(self, scenario: Scenario) -> RiskEstimator:
+        if self.risk_method == "exact":
+            return ExactRisk(scenario)
+        return MonteCarloRisk(scenario, **self._options)
 
     @property
     def risk_tolerance(self) -> float:
@@ -183,12 +191,20 @@ class SMPC(PathFollowingMPC):
     def _risk_terms(self) -> tuple[bool, bool]:
         return (self.risk_budget is not None, bool(self.risk_weight))
 
-    def _risk_value(self, ego: ca.SX, belief: Belief, data: ca.SX) -> ca.SX:
+    def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
         """The per-stage R of the budget and the weight: the constraint's own R (exact:
-        :meth:`~risk_env.risk.ExactRisk.solver_risk`; Monte Carlo: the smoothed estimate)."""
-        if self.risk_method == "monte_carlo":
-            return self.estimator.casadi_risk(ego, belief, samples=data)
-        return self.estimator.solver_risk(ego, belief)
+        :meth:`~risk_env.risk.ExactRisk.solver_risk`; Monte Carlo: the smoothed estimate) summed
+        over the active slots, the expected total harm of the step (linearity of expectation)."""
+        J = self.samples or 0
+        total = None
+        for k, belief in enumerate(beliefs):
+            est = symbolic(self.estimators[k], numbers[k, 1], numbers[k, 2])
+            if self.risk_method == "monte_carlo":
+                r = est.casadi_risk(ego, belief, samples=slot_rows(data, k, J))
+            else:
+                r = est.solver_risk(ego, belief)
+            total = numbers[k, 0] * r if total is None else total + numbers[k, 0] * r
+        return total
 
     def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
         if not any(self._risk_terms()):
@@ -207,26 +223,52 @@ class SMPC(PathFollowingMPC):
     def _risk_parameter_shape(self) -> tuple[int, int]:
         return (self.estimator.samples, 3) if self.risk_method == "monte_carlo" else (0, 0)
 
-    def _margin(self, ego: ca.SX, belief: Belief, epsilon: ca.SX, data: ca.SX, zero: bool) -> ca.SX:
-        if self.risk_method == "monte_carlo":
+    def _margin(
+        self, ego: ca.SX, beliefs: list[Belief], epsilon: ca.SX, data: ca.SX, numbers: ca.SX, zero: bool
+    ) -> ca.SX:
+        J = self.samples or 0
+        clearances, risks = [], []
+        for k, belief in enumerate(beliefs):
+            active, radius = numbers[k, 0], numbers[k, 1]
+            est = symbolic(self.estimators[k], radius, numbers[k, 2])
+            lift = INACTIVE * (1.0 - active)
+            if self.risk_method == "monte_carlo":
+                draws = slot_rows(data, k, J)
+                if zero:
+                    # soft minimum of the distances to the draws: smooth, and below the minimum by
+                    # at most CLEARANCE_SOFTNESS * log(J), so clearance >= 0 keeps the disc off
+                    # every draw
+                    dist = est.distances(ego, draws)
+                    t = CLEARANCE_SOFTNESS
+                    nearest = ca.mmin(
+                        dist
+                    )  # shift for a safe exponent; value and gradient do not depend on it
+                    soft = nearest - t * ca.log(ca.sum1(ca.exp(-(dist - nearest) / t)))
+                    clearances.append(soft - radius + lift)
+                else:
+                    risks.append(active * est.casadi_risk(ego, belief, samples=draws))
+                continue
+            box = symbolic(self._worsts[k], radius, numbers[k, 2])
+            clearances.append(box.distance(ego, belief, CASADI) - radius + lift)
             if not zero:
-                # (epsilon - R) / scale alone: with epsilon > 0 the smoothed R <= epsilon has an
-                # interior and a gradient wherever a draw is near the disc edge, and the
-                # clearance's alternative (disc off every draw) could only matter were epsilon
-                # below the few joules of the logistic's tails, so it is left out (it doubled the
-                # cost of an evaluation)
-                return self.estimator.casadi_margin(ego, belief, epsilon, samples=data)
-            # soft minimum of the distances to the draws: smooth, and below the minimum by at most
-            # CLEARANCE_SOFTNESS * log(J), so clearance >= 0 keeps the disc off every draw
-            dist = self.estimator.distances(ego, data)
-            t = CLEARANCE_SOFTNESS
-            nearest = ca.mmin(dist)  # shift for a safe exponent; the value and gradient do not depend on it
-            return nearest - t * ca.log(ca.sum1(ca.exp(-(dist - nearest) / t))) - self.estimator.radius
-        clearance = self._box.distance(ego, belief, CASADI) - self._box.radius
-        if zero:  # R <= 0 <=> the disc misses every possible object position (box / draws)
-            return clearance
-        # R <= epsilon <=> clearance >= 0 or margin >= 0
-        return ca.fmax(clearance, self.estimator.casadi_margin(ego, belief, epsilon))
+                risks.append(active * est.solver_risk(ego, belief))
+        if zero:  # R <= 0 <=> every disc misses every possible object position (box / draws)
+            return ca.vertcat(*clearances)
+        total = risks[0]
+        for r in risks[1:]:
+            total = total + r
+        margin = (epsilon - total) / self.estimator.severity.scale
+        if self.risk_method == "monte_carlo":
+            # (epsilon - R) / scale alone: with epsilon > 0 the smoothed R <= epsilon has an
+            # interior and a gradient wherever a draw is near the disc edge, and the clearance's
+            # alternative (disc off every draw) could only matter were epsilon below the few
+            # joules of the logistic's tails, so it is left out (it doubled an evaluation's cost)
+            return margin
+        # R <= epsilon <=> every clearance >= 0 or margin >= 0
+        nearest = clearances[0]
+        for c in clearances[1:]:
+            nearest = ca.fmin(nearest, c)
+        return ca.fmax(nearest, margin)
 
     def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
         """Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
@@ -243,13 +285,19 @@ class SMPC(PathFollowingMPC):
             return None
         return np.column_stack([report.inputs, report.path_speed]), report.iterations
 
-    def _risk_data(self, beliefs: Belief) -> np.ndarray:
+    def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
         if self.risk_method != "monte_carlo":
-            return super()._risk_data(beliefs)
-        draws = beliefs.sample(self.rng, self.estimator.samples)  # (J, N, 3)
-        return np.ascontiguousarray(np.moveaxis(draws, 0, 1))  # (N, J, 3)
+            return super()._risk_data(futures)
+        J, N = self.estimator.samples, self.horizon
+        blocks = []
+        for f in futures:  # slot by slot: one slot draws exactly as the single-object SMPC did
+            if f is None:
+                blocks.append(np.zeros((N, J, 3)))
+            else:
+                blocks.append(np.moveaxis(f.sample(self.rng, J), 0, 1))  # (J, N, 3) -> (N, J, 3)
+        return np.ascontiguousarray(np.concatenate(blocks, axis=1))  # (N, K J, 3)
 
-    def _risk_numpy(self, ego: np.ndarray, beliefs: Belief, data: np.ndarray) -> np.ndarray:
+    def _slot_risk(self, slot: int, ego: np.ndarray, belief: Belief, data: np.ndarray) -> np.ndarray:
         if self.risk_method == "monte_carlo":
-            return self.estimator.risk(ego, beliefs, draws=np.moveaxis(data, 1, 0))
-        return self.estimator.risk(ego, beliefs)
+            return self.estimators[slot].risk(ego, belief, draws=np.moveaxis(data, 1, 0))
+        return self.estimators[slot].risk(ego, belief)

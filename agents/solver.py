@@ -51,8 +51,9 @@ from agents.ocp import (
     Margin,
     RiskValue,
     assemble,
+    parameter_vector,
+    slot_numbers,
     stage_functions,
-    uncertainty_vector,
     variable_bounds,
 )
 from risk_env.path import project
@@ -202,9 +203,14 @@ class Problem:
     u_index: np.ndarray
     """(N, NU) positions of the inputs in w."""
     risk_rows: np.ndarray
-    """Rows of g holding margin_n, n = 1..N (empty for ``"free"``)."""
+    """Rows of g holding the risk rows of n = 1..N (one per stage or one per object slot and stage)
+    and the budget's row (empty for ``"free"``)."""
+    row_slack: np.ndarray
+    """For each of :attr:`risk_rows`, the position of its slack in :attr:`slack_index` (a stage's
+    rows share one; empty for hard variants)."""
     slack_index: np.ndarray
-    """Positions of the slacks s_n, n = 1..N, in w (empty for hard variants)."""
+    """Positions of the slacks s_n, n = 1..N (and the budget row's), in w (empty for hard
+    variants)."""
     slack_costs: np.ndarray
     """rho_n, the cost of each slack s_n, in the order of :attr:`slack_index` (empty for hard
     variants)."""
@@ -260,17 +266,18 @@ def build_problem(
     risk_shape: tuple[int, int],
     value: RiskValue | None = None,
     terms: tuple[bool, bool] = (False, False),
+    slots: int = 1,
 ) -> Problem:
-    """Build the NLP of :mod:`agents.ocp` for ``variant`` and its solver (compiled with
-    ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the risk budget and weight
-    (:func:`agents.ocp.assemble`)."""
+    """Build the NLP of :mod:`agents.ocp` for ``variant`` with ``slots`` object slots and its
+    solver (compiled with ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the
+    risk budget and weight (:func:`agents.ocp.assemble`)."""
     t0 = time.perf_counter()
     N = scenario.horizon
-    stages = stage_functions(scenario, variant, margin, risk_shape, value)
+    stages = stage_functions(scenario, variant, margin, risk_shape, value, slots)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
     penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots
     )
 
     base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
@@ -284,7 +291,7 @@ def build_problem(
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
         # code holds the risk row and its derivatives once instead of N times; every rung loads
         # the one library, whose compiled "nlp" leaves nothing to expand
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms)
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots)
         base["expand"] = False
         library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
         jit = library is not None
@@ -310,13 +317,21 @@ def build_problem(
     x_index = np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)])
     u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
     slack_index = np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int)
-    layout = (x_index, u_index, lbg, ubg, risk_shape, slack_index)
+    layout = (x_index, u_index, lbg, ubg, risk_shape, slack_index, slots)
     prior, failing = iteration_times(smallest, scenario, *layout)
     cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
     rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
     solvers = [make(r) for r in rungs] + [smallest]
     limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
 
+    risk_rows = [i for i, tag in enumerate(g_tags) if tag[1] in ("risk", "budget")]
+    slacks = {tag: j for j, tag in enumerate(tag for tag in w_tags if tag[1] == "s")}
+    # the slack of each risk row: its stage's (n, "s", 0), the budget row's (N, "s", 1)
+    row_slack = np.array(
+        [slacks.get((g_tags[i][0], "s", int(g_tags[i][1] == "budget")), -1) for i in risk_rows], dtype=int
+    )
+    if not slacks:
+        row_slack = np.zeros(0, dtype=int)
     return Problem(
         variant=variant,
         solvers=tuple(solvers),
@@ -328,7 +343,8 @@ def build_problem(
         ubg=np.array(ubg),
         x_index=x_index,
         u_index=u_index,
-        risk_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "risk"], dtype=int),
+        risk_rows=np.array(risk_rows, dtype=int),
+        row_slack=row_slack,
         slack_index=slack_index,
         slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
         w_tags=tuple(w_tags),
@@ -351,11 +367,12 @@ def iteration_time(
     ubg: list[float],
     risk_shape: tuple[int, int],
     slack_index: np.ndarray,
+    slots: int = 1,
     repeats: int = 2,
 ) -> float:
-    """The time of one solver iteration [s] on the scenario's start (its object, epsilon and
-    uncertainty; zero risk data) from rest: the fastest of ``repeats`` calls (the first also pays
-    one-time set-up).
+    """The time of one solver iteration [s] on the scenario's start (its objects in the first
+    slots, all active, the rest absent; epsilon; zero risk data) from rest: the fastest of
+    ``repeats`` calls (the first also pays one-time set-up).
 
     The bounds have the steps' pattern (which entries are fixed, which infinite; the slacks >= 0):
     CasADi 3.8's fatrop splits the bounds into equalities and inequalities at every call, and once a
@@ -364,14 +381,15 @@ def iteration_time(
     N, n_w = scenario.horizon, solver.size_in("x0")[0]
     x, y, theta = scenario.ego.start.as_tuple()
     x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
-    obj = scenario.object
-    p = np.concatenate(
-        [
-            [*obj.start.as_tuple(), obj.speed, obj.turn_rate, scenario.risk_tolerance, scenario.ego.v_ref],
-            uncertainty_vector(scenario),
-            np.zeros(N * risk_shape[0] * risk_shape[1]),
-        ]
-    )
+    measurements = np.zeros((slots, 5))
+    active = np.zeros(slots)
+    for k, obj in enumerate(scenario.objects[:slots]):
+        measurements[k] = (*obj.start.as_tuple(), obj.speed, obj.turn_rate)
+        active[k] = 1.0
+    rows = risk_shape[0] * slots
+    data = np.zeros((N, rows, risk_shape[1] if rows else 0))
+    numbers = slot_numbers(scenario, slots)
+    p = parameter_vector(scenario.risk_tolerance, scenario.ego.v_ref, measurements, active, numbers, data)
     p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
     lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0, slack_index)
     w0 = np.zeros(n_w)

@@ -17,7 +17,7 @@ from agents.attempts import Guess, Tally
 from agents.base import SolveReport
 from agents.budget import Budget
 from agents.fallback import feasible_action
-from agents.ocp import soft_variant, uncertainty_vector, variable_bounds
+from agents.ocp import parameter_vector, soft_variant, variable_bounds
 from agents.solver import Problem
 from risk_env import observation as ob
 from risk_env.prediction import Belief
@@ -40,30 +40,33 @@ Outputs = dict[str, np.ndarray]
 
 
 class Step:
-    """The data of one step (state ``x0``, parameters ``p``, the object's beliefs at n = 1..N, the
-    budget) and its levels. ``agent`` supplies the problems, the solver call and its risk."""
+    """The data of one step (state ``x0``, parameters ``p``, each slot's beliefs at n = 1..N
+    (``futures``, None where absent), which slots are ``active``, the budget) and its levels.
+    ``agent`` supplies the problems, the solver call and its risk."""
 
     def __init__(self, agent: PathFollowingMPC, index: int, obs_vec: np.ndarray, budget: Budget) -> None:
         self.agent, self.index, self.obs_vec, self.budget = agent, index, obs_vec, budget
-        o = ob.split(obs_vec)
+        o = ob.split(obs_vec, slots=agent.slots)
         mem = agent._memory.get(index)
         self.memory = None if mem is not None and agent._new_episode(mem, o) else mem
         self.x0 = agent._measured_state(o)
         self.base = agent._problem("free")
-        sc = agent.scenario
-        uncertainty = uncertainty_vector(sc)
-        self.future = Belief.from_array(np.asarray(self.base.beliefs(o.object_measurement, uncertainty))[1:])
-        self.variant = agent._risk_variant() if agent._risk_possible(self.x0, self.future) else "free"
-        self.data = agent._risk_data(self.future)
-        self.p = np.concatenate(
-            [
-                o.object_measurement,
-                [agent._epsilon, sc.ego.v_ref],
-                uncertainty,
-                *(d.ravel(order="F") for d in self.data),
-                agent._terms_parameters(index, self.memory is None),
-            ]
+        numbers = agent._numbers
+        self.futures: list[Belief | None] = [
+            Belief.from_array(np.asarray(self.base.beliefs(o.objects[k], numbers[k, 2:]))[1:])
+            if here
+            else None
+            for k, here in enumerate(o.present)
+        ]
+        # a slot is active when its object is present and may reach the ego within the horizon
+        self.active = np.array(
+            [f is not None and agent._risk_possible(self.x0, f, k) for k, f in enumerate(self.futures)]
         )
+        self.variant = agent._risk_variant() if self.active.any() else "free"
+        self.data = agent._risk_data(self.futures)
+        terms = agent._terms_parameters(index, self.memory is None)
+        v_ref = agent.scenario.ego.v_ref
+        self.p = parameter_vector(agent._epsilon, v_ref, o.objects, self.active, numbers, self.data, terms)
         self.tally = Tally()
 
     # ------------------------------------------------------------------ the levels
@@ -166,15 +169,20 @@ class Step:
 
     def manoeuvre(self) -> tuple[str, np.ndarray]:
         """Level (c): ``(name, inputs (N, NU))`` of the safest manoeuvre (:mod:`agents.fallback`),
-        by the agent's own risk and the worst-case clearance to the truncation boxes."""
+        by the agent's own risk (summed over the present objects) and the worst-case clearance
+        to the nearest of their truncation boxes."""
         agent, x0 = self.agent, self.x0
         t0 = time.perf_counter()
         family = fallback.manoeuvres(agent.scenario, x0)
         ego = np.stack([guesses.rollout(self.base, x0, u)[1:][:, [0, 1, 2, 4]] for u in family.values()])
         risk = np.stack(
-            [np.asarray(agent._risk_numpy(e, self.future, self.data), float).reshape(-1) for e in ego]
+            [np.asarray(agent._risk_numpy(e, self.futures, self.data), float).reshape(-1) for e in ego]
         )
-        clearance = agent._worst.distance(ego, self.future) - agent._worst.radius
+        clearance = np.full(risk.shape, np.inf)
+        for k, f in enumerate(self.futures):
+            if f is not None:
+                worst = agent._worsts[k]
+                clearance = np.minimum(clearance, worst.distance(ego, f) - worst.radius)
         name = list(family)[fallback.safest(risk, clearance, agent._epsilon)]
         agent._manoeuvre_time = max(MANOEUVRE_TIME, 2.0 * (time.perf_counter() - t0))
         return name, family[name]
@@ -272,7 +280,7 @@ class Step:
             inputs=inputs[:, :2].copy(),
             path_speed=inputs[:, 2].copy(),
             lambdas=states[:, 3].copy(),
-            risk_fn=functools.partial(agent._risk_numpy, ego_states, self.future, self.data),
+            risk_fn=functools.partial(agent._risk_numpy, ego_states, self.futures, self.data),
             risk_tolerance=agent._epsilon,
             cost=cost,
             retried=retried,

@@ -1,26 +1,35 @@
-"""Our agents in highway-env: RMPC and SMPC drive ``intersection-v1`` against highway-env's own IDM.
+"""Our agents in highway-env: RMPC and SMPC drive ``intersection-v2`` against highway-env's IDM.
 
-    python -m benchmarks.highway_intersection --episodes 2 --agents rmpc,idm     # a quick look
-    python -m benchmarks.highway_intersection --agents rmpc,smpc,idm,rmpc:3 --out docs/results/highway
+    python -m benchmarks.highway_intersection --episodes 4 --agents rmpc,idm     # a quick look
+    python -m benchmarks.highway_intersection --episodes 200 --out docs/results/highway \\
+        --agents rmpc,smpc:probability:0.01,smpc:injury:0.001,idm
 
-Each agent drives the controlled vehicle of ``intersection-v1`` (:data:`INTERSECTION_CONFIG`: the
-kinematic vehicle with continuous actions, T = 0.5 s, highway-env's traffic, the left turn to
-``"o1"``, 13 s) over the same seeded episodes (seeds 0..E-1; the traffic then reacts to the ego):
+Each agent drives the controlled vehicle of ``intersection-v2`` (``--env intersection-v1``
+selectable; :data:`~risk_env.highway.adapter.INTERSECTION_CONFIG`: the kinematic vehicle with
+continuous actions, T = 0.5 s, highway-env's traffic, the left turn to ``"o1"``, 13 s) over the
+same seeded episodes (seeds S..S+E-1; the traffic then reacts to the ego). Agents (``--agents``):
 
-- ``rmpc``: :class:`agents.RMPC` (worst case, exact box form) through :class:`IntersectionAdapter`;
-- ``smpc``: :class:`agents.SMPC` (exact risk) through the adapter;
-- ``idm``: :class:`IDMEgo`, highway-env's ``IDMVehicle`` on the same route (its reference driver);
-- ``rmpc:3``, ``smpc:3``: the adapter planning against the 3 most conflicting vehicles and applying
-  the slowest plan (``IntersectionAdapter(objects=3)``, a heuristic beyond the paper); the solve
-  time per step is then the sum of the 3 solves.
+- ``rmpc``: :class:`agents.RMPC` (worst case, exact box form) through :class:`IntersectionAdapter`
+  with ``--slots`` object slots (default 5): one solve plans against every observed vehicle, the
+  nearest first, up to the slot count;
+- ``smpc[:SEVERITY:TOLERANCE]``: :class:`agents.SMPC` (exact risk) through the adapter, with its own
+  severity and epsilon (default: ``--severity``, ``--tolerance``), e.g. ``smpc:probability:0.01``
+  (a collision chance of at most 1 % per step under the prediction) or ``smpc:injury:0.001``;
+- ``idm``: :class:`IDMEgo`, highway-env's ``IDMVehicle`` on the same route (its reference driver).
 
-The risk of every step is scored by :class:`RiskCostWrapper` (exact estimator) between the ego and
-every other vehicle, with the agents' scenario (uncertainty preset, severity, the adapter's 2 m
-discs). Reported per agent: collision rate (Wilson 95 % interval) and how many of the collisions
-were with the vehicle the MPC planned against, goal rate (arrived on the road to ``"o1"``),
-timeouts, mean and 95th percentile of the per-step risk, the share of steps above epsilon, the
-MPC's solve time per step (median / p95 / max) and its failed solves. Outputs in ``--out``:
-``intersection.md``, ``intersection.csv`` (summary) and ``intersection_episodes.csv``.
+**Collision kinds** (from the simulator's states at the start of the step that ended in the
+crash): with d the unit vector from the ego's centre to the centre of the vehicle it hit (the
+crashed vehicle nearest the ego), the ego's closing speed is ``v_e . d`` and the other's
+``-v_o . d`` (velocities along each heading). The ego *drove into* the vehicle when its closing
+speed exceeds the other's; otherwise the vehicle *drove into the ego* (rear-ended, or hit while
+stopped or yielding). Rates carry Wilson 95 % intervals.
+
+Reported per agent: collisions by kind, goal rate (arrived on the road to ``"o1"``), time to goal,
+timeouts, the MPC's fallbacks (soft or manoeuvre steps) per episode, solve time per step (median /
+p95 / max; and over the steps with every slot occupied), and the risk scored by
+:class:`RiskCostWrapper` (exact) with ``--severity``. Episodes run in a process pool
+(:mod:`benchmarks.sweep`, ``--workers``). Outputs in ``--out``: ``intersection.md``,
+``intersection.csv`` (summary) and ``intersection_episodes.csv``.
 """
 
 from __future__ import annotations
@@ -28,83 +37,110 @@ from __future__ import annotations
 import argparse
 import csv
 import functools
+import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from benchmarks import cli
 from benchmarks.sampled import wilson
+from benchmarks.sweep import run_sweep
 from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 from risk_env.severity import check_tolerance
 
 AGENTS = ("rmpc", "smpc", "idm")
 LABELS = {"rmpc": "RMPC (worst case)", "smpc": "SMPC (exact)", "idm": "highway-env IDM"}
+ENVS = ("intersection-v2", "intersection-v1")
+CHUNK = 5
+"""Episodes per pool job (each process keeps its env and agents between jobs)."""
+_CACHE: dict[tuple[Any, ...], tuple[Any, Any]] = {}
 
 
-def label(spec: str) -> str:
-    """``"rmpc:3"`` -> ``"RMPC (worst case), 3 objects"``."""
-    name, _, objects = spec.partition(":")
-    return LABELS[name] + (f", {objects} objects" if objects and objects != "1" else "")
+def split_spec(spec: str, args: argparse.Namespace) -> tuple[str, str, float]:
+    """``"smpc:probability:0.01"`` -> ``("smpc", "probability", 0.01)``; missing parts from args."""
+    parts = spec.split(":")
+    name = parts[0]
+    severity = parts[1] if len(parts) > 1 else args.severity
+    tolerance = float(parts[2]) if len(parts) > 2 else args.tolerance
+    return name, severity, tolerance
 
 
-CRASH_MATCH = 6.0
-"""A collision counts as with the planned-for object when the vehicle hit is within this distance
-[m] of where that object was predicted to be after the last step."""
+def label(spec: str, args: argparse.Namespace) -> str:
+    """``"smpc:injury:0.001"`` -> ``"SMPC (exact), injury, eps 0.001"``."""
+    name, severity, tolerance = split_spec(spec, args)
+    return LABELS[name] if name == "idm" else f"{LABELS[name]}, {severity}, eps {tolerance:g}"
 
 
 def make_driver(spec: str, env: Any, args: argparse.Namespace) -> Any:
-    """The driver ``spec`` = ``name[:objects]`` for ``env`` (name one of :data:`AGENTS`)."""
+    """The driver ``spec`` (see the module docstring) for ``env``."""
     from agents import RMPC, SMPC
     from risk_env.highway import IDMEgo, IntersectionAdapter
 
-    name, _, objects = spec.partition(":")
+    name, severity, tolerance = split_spec(spec, args)
     if name == "idm":
         return IDMEgo(env)
     factory = RMPC if name == "rmpc" else functools.partial(SMPC, risk="exact")
+    if args.max_solve_time is not None:
+        factory = functools.partial(factory, max_solve_time=args.max_solve_time)
     return IntersectionAdapter(
         env,
         factory,
         uncertainty=args.uncertainty,
-        risk_tolerance=args.tolerance,
-        severity=args.severity,
-        objects=int(objects or 1),
+        risk_tolerance=tolerance,
+        severity=severity,
+        slots=args.slots,
     )
 
 
-def run_episode(driver: Any, env: Any, seed: int) -> dict[str, Any]:
-    """One episode; returns its row (metrics and per-step arrays)."""
-    from risk_env.dynamics import unicycle_step
-    from risk_env.highway.adapter import reached
-    from risk_env.ops import NUMPY
+def _states(base: Any) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """Position and velocity (along the heading) of every vehicle, by identity."""
+    out = {}
+    for v in base.road.vehicles:
+        vel = float(v.speed) * np.array([np.cos(v.heading), np.sin(v.heading)])
+        out[id(v)] = (np.array(v.position, dtype=float), vel)
+    return out
 
-    obs, info = env.reset(seed=seed)
+
+def crash_kind(base: Any, before: dict[int, tuple[np.ndarray, np.ndarray]]) -> str:
+    """``"ego"`` (the ego drove into the vehicle) or ``"other"`` (it drove into the ego), from the
+    states ``before`` the crash step (see the module docstring)."""
+    ego = base.vehicle
+    hit = [v for v in base.road.vehicles if v is not ego and v.crashed] or [
+        v for v in base.road.vehicles if v is not ego
+    ]
+    other = min(hit, key=lambda v: float(np.hypot(*(v.position - ego.position))))
+    p_e, v_e = before.get(id(ego), (np.array(ego.position), np.zeros(2)))
+    p_o, v_o = before.get(id(other), (np.array(other.position), np.zeros(2)))
+    d = p_o - p_e
+    d = d / max(float(np.hypot(*d)), 1e-9)
+    return "ego" if float(v_e @ d) > float(-v_o @ d) else "other"
+
+
+def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
+    """One episode; returns its row (metrics and per-step arrays)."""
+    from risk_env.highway.adapter import reached
+
+    obs, _ = env.reset(seed=seed)
     if hasattr(driver, "reset"):
         driver.reset()
     base = env.unwrapped
-    risks, times = [], []
-    predicted_object = None
-    done = False
+    risks, times, full = [], [], []
+    done, kind = False, ""
     while not done:
         action, _ = driver.predict(obs)
         if getattr(driver, "last_solve", None) is not None:
             times.append(driver.last_solve_time)
-        obj = getattr(driver, "last_object", None)
-        if obj is not None:
-            predicted_object = np.array(unicycle_step(*obj, env.scenario.dt, NUMPY)[:2], dtype=float)
+            full.append(len(driver.last_objects) >= slots)
+        before = _states(base)
         obs, _, terminated, truncated, info = env.step(action)
         risks.append(info["risk"])
         done = terminated or truncated
-    ego = base.vehicle
-    crashed = bool(ego.crashed)
-    with_object = False
-    if crashed and predicted_object is not None:
-        hit = [v for v in base.road.vehicles if v is not ego and v.crashed]
-        if hit:
-            nearest = min(hit, key=lambda v: float(np.hypot(*(v.position - ego.position))))
-            with_object = bool(np.hypot(*(nearest.position - predicted_object)) < CRASH_MATCH)
+        if base.vehicle.crashed and not kind:
+            kind = crash_kind(base, before)
+    crashed = bool(base.vehicle.crashed)
     goal = reached(env, driver.destination)
     risks = np.array(risks)
     return {
@@ -112,83 +148,128 @@ def run_episode(driver: Any, env: Any, seed: int) -> dict[str, Any]:
         "steps": len(risks),
         "time_s": float(base.time),
         "collision": crashed,
-        "collision_with_object": with_object,
+        "ego_into_vehicle": crashed and kind == "ego",
+        "vehicle_into_ego": crashed and kind == "other",
         "goal": goal,
         "timeout": not crashed and not goal,
         "risk_mean": float(risks.mean()) if len(risks) else 0.0,
-        "risk_max": float(risks.max()) if len(risks) else 0.0,
         "risk_steps": risks,
-        "violations": int(np.sum(risks > env.scenario.risk_tolerance * (1 + 1e-6) + 1e-9)),
         "solve_times": np.array(times),
-        "failed_solves": int(getattr(driver, "failures", 0)),
+        "full": np.array(full, dtype=bool),
+        "fallbacks": int(getattr(driver, "failures", 0)),
     }
 
 
-def summarise(name: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
+def run_chunk(job: tuple[str, list[int], argparse.Namespace]) -> list[dict[str, Any]]:
+    """Episodes ``seeds`` of agent ``spec`` (a pool job; the env and driver kept per process)."""
+    spec, seeds, args = job
+    key = (spec, args.env, args.uncertainty, args.severity, args.tolerance, args.slots, args.max_solve_time)
+    if key not in _CACHE:
+        from risk_env.highway import RiskCostWrapper, make_intersection_env
+        from risk_env.highway.adapter import ADAPTER_DEFAULTS
+
+        radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
+        env = RiskCostWrapper(
+            make_intersection_env(version=args.env),
+            uncertainty=args.uncertainty,
+            estimator="exact",
+            risk_tolerance=args.tolerance,
+            severity=args.severity,
+            **radii,
+        )
+        _CACHE[key] = (env, make_driver(spec, env, args))
+    env, driver = _CACHE[key]
+    out = []
+    for seed in seeds:
+        row = run_episode(driver, env, seed, args.slots)
+        row.update(agent=spec)
+        out.append(row)
+    return out
+
+
+def _ci(k: int, n: int) -> str:
+    lo, hi = wilson(k, n)
+    return f"{100 * k / n:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
+
+
+def summarise(spec: str, rows: list[dict[str, Any]], args: argparse.Namespace) -> dict[str, Any]:
     """One agent's row of the summary table."""
     n = len(rows)
-    collisions = sum(r["collision"] for r in rows)
-    low, high = wilson(collisions, n)
-    risk = np.concatenate([r["risk_steps"] for r in rows]) if rows else np.zeros(0)
-    solve = np.concatenate([r["solve_times"] for r in rows]) * 1e3 if rows else np.zeros(0)
+    solve = np.concatenate([r["solve_times"] for r in rows]) * 1e3
+    full = np.concatenate([r["full"] for r in rows]) if solve.size else np.zeros(0, bool)
     goals = [r["time_s"] for r in rows if r["goal"]]
-    return {
-        "agent": name,
-        "label": label(name),
-        "episodes": n,
-        "collision_rate": collisions / n,
-        "collision_ci_low": low,
-        "collision_ci_high": high,
-        "collisions_with_object": sum(r["collision_with_object"] for r in rows),
+    risk = np.concatenate([r["risk_steps"] for r in rows])
+
+    def stat(a: np.ndarray, q: float) -> float:
+        return float(np.percentile(a, q)) if a.size else float("nan")
+
+    out: dict[str, Any] = {"agent": spec, "label": label(spec, args), "episodes": n}
+    for key in ("collision", "ego_into_vehicle", "vehicle_into_ego"):
+        k = sum(r[key] for r in rows)
+        lo, hi = wilson(k, n)
+        out |= {key: k, f"{key}_rate": k / n, f"{key}_ci_low": lo, f"{key}_ci_high": hi}
+    fallbacks = np.array([r["fallbacks"] for r in rows])
+    return out | {
         "goal_rate": sum(r["goal"] for r in rows) / n,
         "timeout_rate": sum(r["timeout"] for r in rows) / n,
         "time_to_goal_s": float(np.mean(goals)) if goals else float("nan"),
+        "fallbacks": int(fallbacks.sum()),
+        "fallbacks_per_episode": float(fallbacks.mean()),
+        "episodes_with_fallback": int(np.sum(fallbacks > 0)),
         "risk_mean": float(risk.mean()) if risk.size else 0.0,
-        "risk_p95": float(np.percentile(risk, 95)) if risk.size else 0.0,
-        "violation_rate": float(np.mean(risk > rows[0]["epsilon"] * (1 + 1e-6) + 1e-9)) if risk.size else 0.0,
-        "solve_ms_median": float(np.median(solve)) if solve.size else float("nan"),
-        "solve_ms_p95": float(np.percentile(solve, 95)) if solve.size else float("nan"),
-        "solve_ms_max": float(np.max(solve)) if solve.size else float("nan"),
-        "failed_solves": sum(r["failed_solves"] for r in rows),
+        "solve_ms_median": stat(solve, 50),
+        "solve_ms_p95": stat(solve, 95),
+        "solve_ms_max": float(solve.max()) if solve.size else float("nan"),
+        "full_steps": int(full.sum()),
+        "full_solve_ms_median": stat(solve[full], 50),
+        "full_solve_ms_p95": stat(solve[full], 95),
         "steps": int(risk.size),
     }
 
 
-def _fmt(x: Any, digits: int = 1) -> str:
-    if isinstance(x, float):
-        return "-" if np.isnan(x) else f"{x:.{digits}f}"
-    return str(x)
+def _f(x: float, digits: int = 1) -> str:
+    return "-" if np.isnan(x) else f"{x:.{digits}f}"
 
 
-def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: float) -> str:
-    """The summary as a Markdown table with its settings."""
-    head = (
-        "| agent | episodes | collisions [95% CI] | with the planned-for object | goal | timeout |"
-        " time to goal [s] | risk mean | risk p95 | steps > eps | solve ms median / p95 / max |"
-        " failed solves |"
-    )
+def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: float, command: str) -> str:
+    """The summary as a Markdown table with its settings and command."""
+    cap = "20 % of T (the default)" if args.max_solve_time is None else f"{args.max_solve_time:g} s"
+    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
     lines = [
-        f"intersection-v1 (INTERSECTION_CONFIG), seeds {args.seed}..{args.seed + args.episodes - 1},"
-        f" uncertainty {args.uncertainty}, severity {args.severity}, epsilon {args.tolerance:g};"
-        f" risk scored by RiskCostWrapper (exact). Wall time {wall:.0f} s.",
+        f"`{command}`",
         "",
-        head,
-        "| " + " | ".join(["---"] * 12) + " |",
+        f"{args.env} (INTERSECTION_CONFIG), seeds {args.seed}..{args.seed + args.episodes - 1}"
+        f" (N = {args.episodes} per agent), uncertainty {args.uncertainty}, {args.slots} object slots;"
+        f" risk scored by RiskCostWrapper (exact, severity {args.severity}). Wall time {wall:.0f} s"
+        f" on {args.workers or 'all'} worker(s); the MPCs' wall-time cap per step: {cap}; the machine's"
+        f" load average at the end (1 / 5 / 15 min): {load} on {os.cpu_count()} cores (solve times are"
+        " wall times: other processes on the machine lengthen them). Collisions: % [Wilson 95 %"
+        " interval].",
+        "",
+        "| agent | N | collisions | ego drove into a vehicle | a vehicle drove into the ego | goal |"
+        " timeout | time to goal [s] | fallbacks (episodes with any) | solve ms median / p95 / max |"
+        f" solve ms, all {args.slots} slots occupied: median / p95 (steps) |",
+        "| " + " | ".join(["---"] * 11) + " |",
     ]
     for s in summary:
+        idm = s["agent"] == "idm"
+        n = s["episodes"]
         solve = (
             "-"
-            if np.isnan(s["solve_ms_median"])
-            else f"{s['solve_ms_median']:.1f} / {s['solve_ms_p95']:.1f} / {s['solve_ms_max']:.0f}"
+            if idm
+            else f"{_f(s['solve_ms_median'])} / {_f(s['solve_ms_p95'])} / {_f(s['solve_ms_max'], 0)}"
         )
-        idm = s["agent"] == "idm"
-        with_object = "-" if idm else str(s["collisions_with_object"])
+        full = (
+            "-"
+            if idm
+            else f"{_f(s['full_solve_ms_median'])} / {_f(s['full_solve_ms_p95'])} ({s['full_steps']})"
+        )
+        fb = "-" if idm else f"{s['fallbacks']} ({s['episodes_with_fallback']})"
         lines.append(
-            f"| {s['label']} | {s['episodes']} | {100 * s['collision_rate']:.0f}%"
-            f" [{100 * s['collision_ci_low']:.0f}, {100 * s['collision_ci_high']:.0f}] | {with_object} |"
-            f" {100 * s['goal_rate']:.0f}% | {100 * s['timeout_rate']:.0f}% | {_fmt(s['time_to_goal_s'])} |"
-            f" {s['risk_mean']:.3g} | {s['risk_p95']:.3g} | {100 * s['violation_rate']:.1f}% | {solve} |"
-            f" {'-' if idm else s['failed_solves']} |"
+            f"| {s['label']} | {n} | {_ci(s['collision'], n)} | {_ci(s['ego_into_vehicle'], n)} |"
+            f" {_ci(s['vehicle_into_ego'], n)} | {100 * s['goal_rate']:.1f}% |"
+            f" {100 * s['timeout_rate']:.1f}% |"
+            f" {_f(s['time_to_goal_s'])} | {fb} | {solve} | {full} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -196,28 +277,27 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.highway_intersection``."""
     parser = cli.parser("highway_intersection", __doc__)
-    parser.add_argument("--episodes", type=int, default=50, help="seeded episodes per agent")
+    parser.add_argument("--episodes", type=int, default=200, help="seeded episodes per agent")
     parser.add_argument("--seed", type=int, default=0, help="first seed")
+    parser.add_argument("--env", choices=ENVS, default=ENVS[0], help="highway-env intersection")
     parser.add_argument(
         "--agents",
-        default=",".join(AGENTS),
-        help=f"comma list of {', '.join(AGENTS)}; NAME:K (e.g. rmpc:3) plans against the K most"
-        " conflicting vehicles",
+        default="rmpc,smpc:probability:0.01,idm",
+        help="comma list of rmpc, smpc[:SEVERITY:TOLERANCE], idm",
     )
+    parser.add_argument("--slots", type=int, default=5, help="the MPC's object slots")
+    parser.add_argument("--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="Table I level")
+    parser.add_argument("--severity", choices=SEVERITY_NAMES, default="probability", help="severity model")
+    parser.add_argument("--tolerance", type=float, default=0.01, help="epsilon [units of the severity]")
     parser.add_argument(
-        "--uncertainty",
-        choices=UNCERTAINTY_PRESETS,
-        default="low",
-        help="Table I level (per 0.5 s step)",
+        "--max-solve-time",
+        type=float,
+        default=None,
+        help="the MPCs' wall-time cap per step [s] (default: theirs, 20 %% of T; inf: none, results"
+        " independent of the machine's load)",
     )
-    parser.add_argument("--severity", choices=SEVERITY_NAMES, default="paper", help="severity model")
-    parser.add_argument("--tolerance", type=float, default=500.0, help="epsilon [units of the severity]")
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=Path("results/highway"),
-        help="output folder for intersection.md and the CSVs; the committed ones are in docs/results/highway",
-    )
+    parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    parser.add_argument("--out", type=Path, default=Path("results/highway"), help="output folder")
     return parser
 
 
@@ -225,75 +305,52 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
-    unknown = [
-        a
-        for a in args.agents
-        if a.partition(":")[0] not in AGENTS
-        or not (a.partition(":")[2] or "1").isdigit()
-        or a.startswith("idm:")
-    ]
-    if unknown:
-        parser.error(f"unknown agent(s) {unknown}; expected some of {AGENTS}")
-    if args.episodes < 1:
-        parser.error("--episodes must be >= 1")
-    try:
-        check_tolerance(args.tolerance, args.severity, "--tolerance")
-    except ValueError as error:
-        parser.error(str(error))
+    if args.episodes < 1 or args.slots < 1:
+        parser.error("--episodes and --slots must be >= 1")
+    for spec in args.agents:
+        parts = spec.split(":")
+        if parts[0] not in AGENTS or len(parts) > 3 or (parts[0] != "smpc" and len(parts) > 1):
+            parser.error(f"unknown agent {spec!r}; expected rmpc, smpc[:SEVERITY:TOLERANCE] or idm")
+        try:
+            name, severity, tolerance = split_spec(spec, args)
+            if severity not in SEVERITY_NAMES:
+                raise ValueError(
+                    f"unknown severity {severity!r} in {spec!r}; expected one of {SEVERITY_NAMES}"
+                )
+            check_tolerance(tolerance, severity, f"the tolerance of {spec!r}")
+        except ValueError as error:
+            parser.error(str(error))
     return args
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     args = parse_args(argv)
-    from risk_env.highway import RiskCostWrapper, make_intersection_env
-    from risk_env.highway.adapter import ADAPTER_DEFAULTS
-
-    radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
+    command = "python -m benchmarks.highway_intersection " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.perf_counter()
-    rows: dict[str, list[dict[str, Any]]] = {}
-    bar = tqdm(total=len(args.agents) * args.episodes, desc="intersection-v1", unit="episode")
-    for name in args.agents:
-        env = RiskCostWrapper(
-            make_intersection_env(),
-            uncertainty=args.uncertainty,
-            estimator="exact",
-            risk_tolerance=args.tolerance,
-            severity=args.severity,
-            **radii,
-        )
-        driver = make_driver(name, env, args)
-        rows[name] = []
-        for seed in range(args.seed, args.seed + args.episodes):
-            row = run_episode(driver, env, seed)
-            row.update(agent=name, epsilon=args.tolerance)
-            rows[name].append(row)
-            bar.update(1)
-            bar.set_postfix(agent=name, collisions=sum(r["collision"] for r in rows[name]))
-        env.close()
-    bar.close()
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    jobs = [(spec, seeds[i : i + CHUNK], args) for spec in args.agents for i in range(0, len(seeds), CHUNK)]
+    chunks = run_sweep(run_chunk, jobs, workers=args.workers, desc=args.env)
+    rows: dict[str, list[dict[str, Any]]] = {spec: [] for spec in args.agents}
+    for (spec, _, _), chunk in zip(jobs, chunks, strict=True):
+        rows[spec] += chunk
     wall = time.perf_counter() - t0
-    summary = [summarise(name, rows[name]) for name in args.agents]
-
+    summary = [summarise(spec, rows[spec], args) for spec in args.agents]
     args.out.mkdir(parents=True, exist_ok=True)
     with open(args.out / "intersection.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(summary[0]))
         writer.writeheader()
         writer.writerows(summary)
-    episode_fields = [
-        "agent", "seed", "steps", "time_s", "collision", "collision_with_object", "goal", "timeout",
-        "risk_mean", "risk_max", "violations", "failed_solves", "solve_ms_median",
-    ]  # fmt: skip
+    fields = ["agent", "seed", "steps", "time_s", "collision", "ego_into_vehicle", "vehicle_into_ego",
+              "goal", "timeout", "risk_mean", "fallbacks"]  # fmt: skip
     with open(args.out / "intersection_episodes.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=episode_fields)
+        writer = csv.DictWriter(f, fieldnames=[*fields, "solve_ms_median"])
         writer.writeheader()
-        for name in args.agents:
-            for r in rows[name]:
+        for spec in args.agents:
+            for r in rows[spec]:
                 solve = r["solve_times"]
-                writer.writerow(
-                    {k: r[k] for k in episode_fields if k in r}
-                    | {"solve_ms_median": float(np.median(solve)) * 1e3 if solve.size else ""}
-                )
-    text = markdown(summary, args, wall)
+                median = float(np.median(solve)) * 1e3 if solve.size else ""
+                writer.writerow({k: r[k] for k in fields} | {"solve_ms_median": median})
+    text = markdown(summary, args, wall, command)
     (args.out / "intersection.md").write_text(text)
     print(text)
     return summary

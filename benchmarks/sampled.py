@@ -72,6 +72,8 @@ COLUMNS = (
     "solve_ms_median",
     "fallback_soft",
     "fallback_manoeuvre",
+    "fallbacks_per_episode",
+    "episodes_with_fallback",
 )
 
 
@@ -199,6 +201,8 @@ def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
         "solve_ms_median": round(float(np.median(solve)), 2),
         "fallback_soft": int(sum(e["soft"] for e in episodes)),
         "fallback_manoeuvre": int(sum(e["manoeuvre"] for e in episodes)),
+        "fallbacks_per_episode": round(sum(e["failures"] for e in episodes) / n, 3),
+        "episodes_with_fallback": int(sum(e["failures"] > 0 for e in episodes)),
     }
 
 
@@ -215,8 +219,8 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         "",
         "| agent | severity | unc. | eps | episodes | collisions/episode [95% CI] | risk mean | risk p95 |"
         " steps > eps | harm/step | episode risk mean (max) | harm/episode | e_acc | d_min mean (min) |"
-        " goal | fallbacks (soft / manoeuvre) |",
-        "|" + " --- |" * 16,
+        " goal | fallbacks (soft / manoeuvre) | fallbacks/episode (episodes with any) |",
+        "|" + " --- |" * 17,
     ]
     for r in rows:
         lines.append(
@@ -228,7 +232,8 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f"{r['harm_per_episode']:.3g} | {r['e_acc_mean']:.1f} | "
             f"{r['d_min_mean']:.1f} ({r['d_min_min']:.1f}) | "
             f"{100 * r['goal_rate']:.0f}% | "
-            f"{r['failed_solves']} ({r['fallback_soft']} / {r['fallback_manoeuvre']}) |"
+            f"{r['failed_solves']} ({r['fallback_soft']} / {r['fallback_manoeuvre']}) | "
+            f"{r['fallbacks_per_episode']:.2f} ({r['episodes_with_fallback']}) |"
         )
     return "\n".join(lines) + "\n"
 

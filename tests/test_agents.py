@@ -533,7 +533,7 @@ def test_free_variant_when_no_box_is_reachable(monkeypatch) -> None:
     action, _ = free.predict(obs)
     assert free.last_solve.variant == "free" and free.last_solve.success
     forced = SMPC(scenario)
-    monkeypatch.setattr(forced, "_risk_possible", lambda x0, future: True)
+    monkeypatch.setattr(forced, "_risk_possible", lambda x0, future, slot=0: True)
     forced_action, _ = forced.predict(obs)
     assert forced.last_solve.variant == "general" and forced.last_solve.success
     np.testing.assert_allclose(action, forced_action, atol=1e-3)
@@ -703,7 +703,8 @@ def test_exact_smpc_risk_rows_and_their_jacobian_are_the_estimators() -> None:
     agent = SMPC.from_env(env)
     exact, box = make_estimator("exact", scenario), make_estimator("worst_case", scenario)
     e, b, eps = ca.SX.sym("e", 4), ca.SX.sym("b", Belief.SIZE), ca.SX.sym("eps")
-    margin = agent._margin(e, Belief.from_array(b), eps, ca.SX(0, 0), False)
+    numbers = ca.DM([[1.0, scenario.collision_distance, scenario.object.mass]])
+    margin = agent._margin(e, [Belief.from_array(b)], eps, ca.SX(0, 0), ca.SX(numbers), False)
     row = ca.Function("row", [e, b, eps], [margin, ca.jacobian(margin, e)])
 
     def numpy_row(ego: np.ndarray, beliefs) -> np.ndarray:

@@ -96,3 +96,28 @@ def test_weight_lowers_the_planned_risk() -> None:
         sums.append(float(np.sum(agent.last_solve.risk_fn())))
     assert sums[0] > 1e-3
     assert sums[1] < 0.5 * sums[0]
+
+
+def test_budget_and_weight_sum_over_every_object_slot() -> None:
+    """Two objects: one p layout ([epsilon, v_ref, 2 slot blocks, TERMS]); the budget's and the
+    weight's per-stage R is the sum over the active slots, so the agent's spent risk is the env's
+    summed episode risk, and the budget holds without a fallback."""
+    from agents.ocp import SLOT_SIZE, TERMS
+
+    budget = 0.3
+    env = gym.make(
+        "RiskCrossing-v0", uncertainty="medium", severity="probability", scene="two_crossing", max_steps=40
+    )
+    agent = SMPC.from_env(
+        env, risk_budget=budget, risk_weight=1.0, risk_tolerance=math.inf, max_solve_time=math.inf
+    )
+    assert agent.slots == 2
+    pr = agent._problem("general")
+    assert pr.evaluate.size_in(1)[0] == 2 + 2 * SLOT_SIZE + TERMS  # exact risk: no risk data
+    row_kinds = {pr.g_tags[i][1] for i in pr.risk_rows}
+    assert row_kinds == {"risk", "budget"}
+    info, applied, _ = _episode(agent, env, 0)
+    assert agent.spent_risk() == pytest.approx(sum(applied), rel=1e-12, abs=1e-15)
+    assert agent.spent_risk() == pytest.approx(info["episode_risk"], rel=1e-5, abs=1e-9)
+    if agent.failures == 0:
+        assert info["episode_risk"] <= budget * (1 + 1e-6)

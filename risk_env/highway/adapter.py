@@ -1,4 +1,4 @@
-"""Our MPC agents drive highway-env's controlled vehicle on ``intersection-v1``.
+"""Our MPC agents drive highway-env's controlled vehicle on ``intersection-v2`` (or ``-v1``).
 
 :class:`IntersectionAdapter` sits between highway-env and an agent that speaks RiskCrossing
 (``action, _ = agent.predict(obs)``, :mod:`risk_env.observation`): it turns highway-env's
@@ -17,12 +17,13 @@ The approximation: within a horizon that runs past the end of a lane, the MPC's 
 that lane's arc (straight on, or round the circle) rather than turning into the next lane; the
 plan bends at the hand-over, one step late. The new agent starts cold (no warm start).
 
-**The object.** Our agents plan against one object. Among the observed vehicles, the adapter takes
-the one that conflicts first with the ego driving the route at ``v_ref`` (the first prediction step
-at which its truncation box could reach the ego's disc; ties by the closest predicted approach):
-usually the nearest vehicle crossing the route. The others are not avoided (``objects=k`` plans
-against the k first and applies the slowest plan, a heuristic). Its measurement is observed position,
-heading and speed; its turn rate is the change of its heading since the previous step, when the
+**The objects.** The agent has ``slots`` object slots (default :data:`DEFAULT_SLOTS`; the adapter
+builds its agents with ``object_slots=slots``) and one solve plans against every vehicle it is
+handed (:mod:`agents.objects`). The adapter hands it every observed vehicle, nearest first, up to
+the slot count; the other slots are flagged absent (no stand-in object, no choice of a "first
+conflict"). Only when more vehicles are observed than there are slots are the farthest left out.
+Each measurement is observed position, heading and speed; its turn rate is the change of its
+heading since the previous step, when the
 vehicle can be associated with one seen then (within :data:`TRACK_GATE` of where it was predicted),
 else 0. highway-env's observation has no steering, so the heading stands in for the direction of
 travel (they differ by the slip angle, up to ~0.2 rad in a tight turn).
@@ -50,10 +51,10 @@ import numpy as np
 from risk_env import observation as layout
 from risk_env.dynamics import unicycle_step
 from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
-from risk_env.highway.route import RoutePath
+from risk_env.highway.idm import IDMEgo, reached
+from risk_env.highway.route import LaneIndex, RoutePath, lane_path
 from risk_env.ops import NUMPY
 from risk_env.path import path_error_vector, project
-from risk_env.prediction import predict
 from risk_env.scenario import ReferencePath, Scenario
 
 INTERSECTION_CONFIG: dict[str, Any] = {
@@ -100,19 +101,30 @@ CURVE_SPEED_SHARE = 0.9
 followable (:class:`~risk_env.Scenario` requires ``curvature * v_ref <= omega_max``)."""
 MIN_TURN_SPEED = 0.5
 """Below this mean speed [m/s] the steering for a turn rate is computed as at this speed."""
-FAR = 1e3
-"""Offset [m] of the stand-in object when no other vehicle is observed (no risk anywhere near)."""
 
 
-def make_intersection_env(render_mode: str | None = None, **config: Any) -> gym.Env:
-    """``gym.make("intersection-v1")`` with :data:`INTERSECTION_CONFIG`, updated by ``config``."""
+VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
+"""The intersections the adapter drives. ``intersection-v2`` (default): highway-env 1.12 fixed its
+traffic's neighbour search there and recommends it for new experiments; ``intersection-v1``: the
+earlier traffic, selectable for comparison."""
+DEFAULT_SLOTS = 5
+"""The agents' object slots: every observed vehicle up to this many is planned against."""
+
+
+def make_intersection_env(
+    render_mode: str | None = None, version: str = VERSIONS[0], **config: Any
+) -> gym.Env:
+    """``gym.make(version)`` (one of :data:`VERSIONS`) with :data:`INTERSECTION_CONFIG`, updated
+    by ``config``."""
     from risk_env.highway.common import require_highway_env
 
+    if version not in VERSIONS:
+        raise ValueError(f"unknown intersection {version!r}; expected one of {VERSIONS}")
     require_highway_env()
     merged = {**INTERSECTION_CONFIG, **config}
-    with warnings.catch_warnings():  # gymnasium: "intersection-v1 is out of date" (we want v1)
+    with warnings.catch_warnings():  # gymnasium: "intersection-v1 is out of date" (selectable)
         warnings.simplefilter("ignore", DeprecationWarning)
-        return gym.make("intersection-v1", render_mode=render_mode, config=merged)
+        return gym.make(version, render_mode=render_mode, config=merged)
 
 
 class IntersectionAdapter:
@@ -126,17 +138,15 @@ class IntersectionAdapter:
     Args:
         env: a highway-env env configured as :data:`INTERSECTION_CONFIG` (or compatibly).
         make_agent: builds an agent for a scenario, e.g. ``agents.RMPC`` or
-            ``functools.partial(agents.SMPC, risk="exact")``; called once per lane geometry.
+            ``functools.partial(agents.SMPC, risk="exact")``; called once per lane geometry as
+            ``make_agent(scenario, object_slots=slots)``.
         uncertainty, risk_tolerance, **overrides: the scenario,
             :func:`risk_env.highway.highway_scenario` with :data:`ADAPTER_DEFAULTS` first.
         destination: the node the route leads to (default: the env's ``config["destination"]``).
         switch_ahead: hand over to the next lane this many metres [m] before the end of a lane
             (2 m: about half a step at v_ref, so the hand-over comes the step before the lane ends).
-        objects: plan against this many of the most conflicting vehicles, one solve each (the
-            agent's batch ``predict``, a warm start per slot), and apply the plan whose first speed
-            is the lowest. 1 (default): the design above, one object. More is the adapter's
-            heuristic, not the paper's method: each plan respects one object's risk bound, and the
-            slowest is not guaranteed to respect the others'.
+        slots: the agent's object slots K (default :data:`DEFAULT_SLOTS`): the nearest K observed
+            vehicles are planned against, in one solve.
     """
 
     def __init__(
@@ -147,7 +157,7 @@ class IntersectionAdapter:
         risk_tolerance: float = 0.0,
         destination: str | None = None,
         switch_ahead: float = 2.0,
-        objects: int = 1,
+        slots: int = DEFAULT_SLOTS,
         **overrides: Any,
     ) -> None:
         self.env = env
@@ -169,18 +179,17 @@ class IntersectionAdapter:
         self.route: RoutePath | None = None
         self.lane = 0
         """Index in :attr:`route` of the lane being followed."""
-        if isinstance(objects, bool) or not isinstance(objects, int) or objects < 1:
-            raise ValueError(f"objects must be an integer >= 1, got {objects!r}")
-        self.objects = objects
+        if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
+            raise ValueError(f"slots must be an integer >= 1, got {slots!r}")
+        self.slots = slots
         self.last_objects = np.zeros((0, 5))
-        """Measurements ``(m, 5)`` of the objects planned against at the last step, most conflicting first."""
-        self.last_object: np.ndarray | None = None
-        """The measurement ``(5,)`` of the object whose plan was applied at the last step."""
+        """Measurements ``(m, 5)``, m <= :attr:`slots`, of the vehicles planned against at the last
+        step, nearest first."""
         self.last_solves: list[Any] = []
-        """The solve reports of the last step, one per object."""
+        """The solve report of the last step (one)."""
         self._last_solve: Any = None
         self.last_observation: np.ndarray | None = None
-        """The observation ``(16,)`` (one object slot) the agent got at the last step."""
+        """The observation ``(10 + 6 K,)`` the agent got at the last step."""
         self._vehicle: Any = None
         self._tracks = np.zeros((0, 5))
         self._steering = 0.0
@@ -205,7 +214,7 @@ class IntersectionAdapter:
 
     @property
     def last_solve_time(self) -> float:
-        """Wall time [s] of the agent's solves of the last step, summed over the objects."""
+        """Wall time [s] of the agent's solve of the last step."""
         return float(sum(getattr(r, "solve_time", 0.0) for r in self.last_solves if r is not None))
 
     @property
@@ -235,22 +244,18 @@ class IntersectionAdapter:
         switched = self._advance(x, y)
         scenario = self._scenario_for(self.lane)
         others = self._measure_others(rows[1:])
-        progress = self.route.progress(self.lane, x, y)
-        self.last_objects = self._select_objects(others, progress, scenario)
+        nearest = np.argsort(np.hypot(others[:, 0] - x, others[:, 1] - y), kind="stable")
+        self.last_objects = others[nearest[: self.slots]]
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
-        batch = np.array(
-            [layout.build((x, y, theta), (speed, self._omega), lam, error, [o]) for o in self.last_objects]
-        )  # (m, 16): one observation per object (one slot), the same ego
+        obs = layout.build((x, y, theta), (speed, self._omega), lam, error, self.last_objects, self.slots)
         agent = self._agent_for(self.lane)
-        start = np.full(len(batch), self._fresh or switched)
-        actions, _ = agent.predict(batch, episode_start=start, deterministic=True)
+        action, _ = agent.predict(obs, episode_start=self._fresh or switched, deterministic=True)
         self._fresh = False
-        reports = list(getattr(agent, "last_solves", None) or [None] * len(batch))
-        chosen = int(np.argmin(actions[:, 0]))  # the most cautious plan: the lowest speed
-        self.last_object, self.last_observation = self.last_objects[chosen], batch[chosen]
-        self._last_solve, self.last_solves = reports[chosen], reports
-        v, omega = (float(a) for a in actions[chosen])
+        self.last_observation = obs
+        self._last_solve = getattr(agent, "last_solve", None)
+        self.last_solves = [self._last_solve]
+        v, omega = (float(a) for a in action)
         highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)
         self._omega = omega
         return highway_action, None
@@ -384,7 +389,7 @@ class IntersectionAdapter:
         scenario = self._scenario_for(lane)
         path = self.route.paths[lane]
         if path not in self._agents:
-            self._agents[path] = self.make_agent(scenario)
+            self._agents[path] = self.make_agent(scenario, object_slots=self.slots)
         return self._agents[path]
 
     def _measure_others(self, rows: np.ndarray) -> np.ndarray:
@@ -404,68 +409,14 @@ class IntersectionAdapter:
         self._tracks = np.column_stack([rows, omega]) if len(rows) else np.zeros((0, 5))
         return self._tracks.copy()
 
-    def _select_objects(self, others: np.ndarray, progress: float, scenario: Scenario) -> np.ndarray:
-        """Measurements ``(m, 5)``, m <= :attr:`objects`, of the vehicles that conflict first with
-        the ego driving the route at v_ref: ranked by the first prediction step n at which the
-        ego's disc could touch the vehicle's truncation box (centre gap <= r_e + r_o + the box's
-        half diagonal), then (ties, and vehicles that never conflict) by their closest predicted
-        approach. A far, still stand-in when no vehicle is observed."""
-        if len(others) == 0:
-            x, y = self.route.position(progress)
-            return np.array([[x + FAR, y + FAR, 0.0, 0.0, 0.0]])
-        n_steps = scenario.horizon + 1
-        ego_xy = self.route.position(progress + scenario.ego.v_ref * scenario.dt * np.arange(n_steps))
-        beliefs = predict(scenario, others.T)  # N+1 beliefs, fields (K,)
-        gaps = np.array([np.hypot(b.x - ego_xy[n, 0], b.y - ego_xy[n, 1]) for n, b in enumerate(beliefs)])
-        reach = np.array([scenario.collision_distance + np.hypot(b.half_x, b.half_y) for b in beliefs])
-        conflict = gaps <= reach.reshape(-1, 1)  # (N+1, K)
-        first = np.where(conflict.any(axis=0), np.argmax(conflict, axis=0), n_steps)
-        return others[np.lexsort((gaps.min(axis=0), first))[: self.objects]]
 
-
-class IDMEgo:
-    """highway-env's own driver as a reference: at the start of each episode the controlled vehicle
-    is replaced by the env's ``other_vehicles_type`` (``IDMVehicle``) at the same state, routed to
-    ``destination``; it then drives itself (IDM speed, lane keeping, the intersection's yielding
-    rules), whatever action is passed. ``predict`` returns a zero action."""
-
-    def __init__(self, env: gym.Env, destination: str | None = None) -> None:
-        self.env = env
-        base = unwrapped_highway(env)
-        self.destination = destination or base.config.get("destination")
-        if not self.destination:
-            raise ValueError("no destination: pass destination= or set the env's config['destination']")
-        self._vehicle: Any = None
-        self.last_solve = None
-
-    def reset(self) -> None:
-        self._vehicle = None
-
-    def predict(
-        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
-    ) -> tuple[np.ndarray, None]:
-        base = unwrapped_highway(self.env)
-        if base.vehicle is not self._vehicle:
-            self._take_over(base)
-        return np.zeros(self.env.action_space.shape, dtype=np.float32), None
-
-    def _take_over(self, base: Any) -> None:
-        from highway_env import utils
-
-        old = base.vehicle
-        cls = utils.class_from_path(base.config["other_vehicles_type"])
-        idm = cls(base.road, old.position.copy(), heading=old.heading, speed=old.speed)
-        idm.plan_route_to(self.destination)
-        base.road.vehicles[base.road.vehicles.index(old)] = idm
-        base.controlled_vehicles[base.controlled_vehicles.index(old)] = idm
-        self._vehicle = idm
-
-
-def reached(env: gym.Env, destination: str) -> bool:
-    """Whether the controlled vehicle has arrived on the road to ``destination``: highway-env's
-    ``has_arrived`` (25 m into an exit lane) on that destination's exit (``has_arrived`` alone
-    accepts any exit)."""
-    base = unwrapped_highway(env)
-    vehicle = base.vehicle
-    arrived = base.has_arrived(vehicle) if hasattr(base, "has_arrived") else True
-    return bool(arrived and vehicle.lane_index[1] == destination)
+__all__ = [
+    "ADAPTER_DEFAULTS",
+    "INTERSECTION_CONFIG",
+    "IDMEgo",
+    "IntersectionAdapter",
+    "LaneIndex",
+    "RoutePath",
+    "lane_path",
+    "reached",
+]
