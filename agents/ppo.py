@@ -186,9 +186,11 @@ class InputLimits:
     """Largest turn-rate change per step [rad/s] (omega_rate_max dt)."""
 
     @classmethod
-    def of(cls, scenario: Scenario) -> InputLimits:
+    def of(cls, scenario: Scenario, forward_only: bool = False) -> InputLimits:
+        """The limits of ``scenario``'s ego; ``forward_only``: no reversing (v >= 0)."""
         e = scenario.ego
-        return cls(e.v_min, e.v_max, e.omega_max, e.accel_max * scenario.dt, e.omega_rate_max * scenario.dt)
+        v_min = max(e.v_min, 0.0) if forward_only else e.v_min
+        return cls(v_min, e.v_max, e.omega_max, e.accel_max * scenario.dt, e.omega_rate_max * scenario.dt)
 
 
 def to_inputs(action: np.ndarray, last_input: np.ndarray, limits: InputLimits) -> np.ndarray:
@@ -248,7 +250,7 @@ class PPOAgent:
         meta_path = zip_path.with_suffix(METADATA_SUFFIX)
         metadata = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
         if scenario is not None:
-            limits = InputLimits.of(scenario)
+            limits = InputLimits.of(scenario, bool(metadata.get("args", {}).get("forward_only", False)))
         elif "limits" in metadata:
             limits = InputLimits(**metadata["limits"])
         else:

@@ -18,15 +18,25 @@ from typing import Any
 from benchmarks import cli
 
 SETTINGS: dict[str, list[str]] = {
-    "path error only": ["--lagrangian", "--w-progress", "0", "--w-goal", "0"],
-    "progress 1, goal 10": ["--lagrangian"],
-    "progress 2, goal 30": ["--lagrangian", "--w-progress", "2", "--w-goal", "30"],
-    "progress 1, goal 10, prediction": ["--lagrangian", "--prediction"],
-    "progress 1, goal 10, penalty beta 50": [],
+    "path error only, penalty 300": ["--w-progress", "0", "--w-goal", "0"],
+    "progress 1, goal 10, penalty 300": [],
+    "progress 2, goal 30, penalty 300": ["--w-progress", "2", "--w-goal", "30"],
+    "progress 1, goal 10, penalty 300, prediction": ["--prediction"],
+    "progress 1, goal 10, Lagrangian from 300": ["--lagrangian"],
 }
 """Setting name -> the train_ppo flags that make it (beside --total-timesteps and --seed)."""
 EPSILONS = (0.0, 2500.0)
 """epsilon of the evaluations [J]."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.ppo_study``."""
+    p = cli.parser("ppo_study", __doc__)
+    p.add_argument("--total-timesteps", type=int, default=1_500_000, help="env steps per setting")
+    p.add_argument("--episodes", type=int, default=256, help="evaluation episodes per epsilon")
+    p.add_argument("--seed", type=int, default=0, help="training seed of every setting")
+    p.add_argument("--out", type=Path, default=Path("results/ppo_study"), help="output folder")
+    return p
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
@@ -34,12 +44,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     from benchmarks import train_ppo
     from benchmarks.ppo_eval import evaluate
 
-    p = cli.parser("ppo_study", __doc__)
-    p.add_argument("--total-timesteps", type=int, default=1_500_000, help="env steps per setting")
-    p.add_argument("--episodes", type=int, default=256, help="evaluation episodes per epsilon")
-    p.add_argument("--seed", type=int, default=0, help="training seed of every setting")
-    p.add_argument("--out", type=Path, default=Path("results/ppo_study"), help="output folder")
-    args = p.parse_args(argv)
+    args = build_parser().parse_args(argv)
     rows: list[dict[str, Any]] = []
     for i, (name, flags) in enumerate(SETTINGS.items()):
         model = f"setting{i}"

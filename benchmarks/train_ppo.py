@@ -47,9 +47,9 @@ class Args:
     seed: int = 0
     """Seed of the env copies, the policy's initialisation and its sampling."""
     seeds: int = 1
-    """Train this many seeds (seed, seed + 1, ...): each is saved as ``NAME_seedS`` and scored
-    on sampled motion (``--eval-episodes``); the table of mean +- std goes to ``OUT/NAME_seeds.md``
-    and the best seed is copied to ``NAME.zip``."""
+    """Train this many seeds (seed, seed + 1, ...): each is saved as ``OUT/NAME_seeds/NAME_seedS``
+    and scored on sampled motion (``--eval-episodes``); the table of mean +- std goes to
+    ``OUT/NAME_seeds.md`` (and ``.json``) and the best seed is copied to ``OUT/NAME.zip``."""
     uncertainty: str = "low,medium,high"
     """Comma list of the uncertainty presets trained on: the copies are split evenly over them."""
     tolerances: str = "0,500,1000,1500,2000,2500"
@@ -58,12 +58,16 @@ class Args:
     """Show the policy epsilon and the uncertainty (agents.ppo.FeatureSpec)."""
     prediction: bool = False
     """Also show the object's predicted means and truncation boxes over the horizon."""
+    forward_only: bool = True
+    """Map the policy's actions to speeds v >= 0 (no reversing: unrestricted, PPO found reversing
+    to the goal with the ego turned around, a local optimum of the path error)."""
     severity: str = "paper"
     """Severity of the risk in the cost (the paper's, in J, as Table II's epsilon)."""
     object_motion: str = "sampled"
     """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
-    randomize: bool = True
-    """Train on seeded variations of the scenario (curvature, starts, object speed)."""
+    randomize: bool = False
+    """Train on seeded variations of the scenario (curvature, starts, object speed); off: the
+    paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
     w_path_error: float = 1.0
     """Reward per unit of the path error ||e_{k+1}|| (subtracted)."""
     w_progress: float = 1.0
@@ -74,7 +78,7 @@ class Args:
     """Risk above epsilon per unit of cost [the severity's unit]."""
     collision_cost: float = 1.0
     """Cost of a collision [cost units]."""
-    risk_weight: float = 50.0
+    risk_weight: float = 300.0
     """beta: the penalty per unit of cost (the initial value with --lagrangian)."""
     penalty_warmup: int = 0
     """Env steps at beta = 0 before the penalty switches on (without --lagrangian): the policy
@@ -84,7 +88,7 @@ class Args:
     cost_limit: float = 0.02
     """Per-episode cost the Lagrangian aims at: the mean over the rollout's finished episodes of
     sum_k c_k (agents.ppo_env.RewardWeights: a collision counts collision_cost)."""
-    dual_lr: float = 20.0
+    dual_lr: float = 5.0
     """Step size of the dual ascent on beta [beta per unit of episode cost]."""
     n_steps: int = 128
     """Rollout length per copy between updates."""
@@ -217,7 +221,7 @@ def make_env(args: Args) -> Any:
     beta = 0.0 if args.penalty_warmup > 0 and not args.lagrangian else args.risk_weight
     view = PolicyView(
         env,
-        InputLimits.of(env.base_scenario),
+        InputLimits.of(env.base_scenario, args.forward_only),
         feature_spec(args, env.base_scenario.dt),
         weights,
         tolerances(args),
@@ -322,7 +326,7 @@ def train(args: Args) -> dict[str, Any]:
     history = callbacks[0].history
     metadata = {
         "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(args).items()},
-        "limits": dataclasses.asdict(InputLimits.of(venv.get_attr("base_scenario")[0])),
+        "limits": dataclasses.asdict(InputLimits.of(venv.get_attr("base_scenario")[0], args.forward_only)),
         "features": FEATURES if spec is None else spec.size,
         **({} if spec is None else {"feature_spec": dataclasses.asdict(spec)}),
         "timesteps": int(model.num_timesteps),
@@ -347,18 +351,20 @@ def train_seeds(args: Args) -> dict[str, Any]:
     from benchmarks.ppo_eval import best_seed, evaluate, seed_table
 
     results: dict[int, dict[str, float]] = {}
+    folder = args.out / f"{args.name}_seeds"
     walls: dict[int, dict[str, float]] = {}
     for seed in range(args.seed, args.seed + args.seeds):
-        one = dataclasses.replace(args, seed=seed, seeds=1, name=f"{args.name}_seed{seed}")
+        folder = args.out / f"{args.name}_seeds"
+        one = dataclasses.replace(args, seed=seed, seeds=1, name=f"{args.name}_seed{seed}", out=folder)
         meta = train(one)
         walls[seed] = {"wall_time_s": meta["wall_time_s"], "steps_per_s": meta["steps_per_s"]}
         results[seed] = evaluate(
-            args.out / f"{one.name}.zip", args.eval_episodes, "medium", args.eval_epsilon, seed=0
+            folder / f"{one.name}.zip", args.eval_episodes, "medium", args.eval_epsilon, seed=0
         )
         print(f"seed {seed}: " + ", ".join(f"{k} {v:.4g}" for k, v in results[seed].items()))
     best = best_seed(results, args.cost_limit)
     for suffix in (".zip", ".json"):
-        shutil.copyfile(args.out / f"{args.name}_seed{best}{suffix}", args.out / f"{args.name}{suffix}")
+        shutil.copyfile(folder / f"{args.name}_seed{best}{suffix}", args.out / f"{args.name}{suffix}")
     header = (
         f"{args.name}: {args.seeds} seeds x {planned_timesteps(args):,} env steps; each scored on"
         f" {args.eval_episodes} episodes (seeds 0..{args.eval_episodes - 1}), sampled motion, medium"

@@ -264,3 +264,18 @@ def test_seed_table_and_best_seed() -> None:
     table = seed_table(results, 2, "header")
     assert "| 2 (shipped) | 90.0 | 0.0% | 95.0% |" in table
     assert "| mean ± std over 3 | 80.0 ± 10.0 | 0.3% ± 0.6% |" in table
+
+
+def test_seeds_train_score_and_ship_the_best(tmp_path: Path) -> None:
+    out = tmp_path / "ppo"
+    command = [sys.executable, "-m", "benchmarks.train_ppo", "--out", str(out), "--total-timesteps", "512"]
+    command += ["--num-envs", "4", "--n-steps", "64", "--batch-size", "128", "--no-progress-bar"]
+    command += ["--seeds", "2", "--eval-episodes", "6", "--checkpoint-every", "0"]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    summary = json.loads((out / "model_seeds.json").read_text())
+    assert set(summary["results"]) == {"0", "1"} and summary["best"] in (0, 1)
+    best = out / "model_seeds" / f"model_seed{summary['best']}.zip"
+    assert (out / "model.zip").read_bytes() == best.read_bytes()
+    table = (out / "model_seeds.md").read_text()
+    assert "mean ± std over 2" in table and f"| {summary['best']} (shipped) |" in table
