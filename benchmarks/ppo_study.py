@@ -18,13 +18,21 @@ from typing import Any
 from benchmarks import cli
 
 SETTINGS: dict[str, list[str]] = {
-    "path error only, penalty 300": ["--w-progress", "0", "--w-goal", "0"],
-    "progress 1, goal 10, penalty 300": [],
-    "progress 2, goal 30, penalty 300": ["--w-progress", "2", "--w-goal", "30"],
-    "progress 1, goal 10, penalty 300, prediction": ["--prediction"],
-    "progress 1, goal 10, Lagrangian from 300": ["--lagrangian"],
+    "path error only, penalty 300": ["--w-progress", "0", "--w-goal", "0", "--no-prediction"],
+    "progress 1, goal 10, penalty 300": ["--w-progress", "1", "--w-goal", "10", "--no-prediction"],
+    "progress 2, goal 30, penalty 300": ["--w-progress", "2", "--w-goal", "30", "--no-prediction"],
+    "progress 1, goal 10, penalty 300, prediction": ["--w-progress", "1", "--w-goal", "10", "--prediction"],
+    "progress 1, goal 10, Lagrangian from 300": [
+        "--w-progress",
+        "1",
+        "--w-goal",
+        "10",
+        "--no-prediction",
+        "--lagrangian",
+    ],
 }
-"""Setting name -> the train_ppo flags that make it (beside --total-timesteps and --seed)."""
+"""Setting name -> the train_ppo flags that make it (beside --total-timesteps and --seed); every
+setting trains with --risk-weight 300 and the other defaults of train_ppo."""
 EPSILONS = (0.0, 2500.0)
 """epsilon of the evaluations [J]."""
 
@@ -48,7 +56,15 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for i, (name, flags) in enumerate(SETTINGS.items()):
         model = f"setting{i}"
-        argv_one = [*flags, "--total-timesteps", str(args.total_timesteps), "--seed", str(args.seed)]
+        argv_one = [
+            *flags,
+            "--risk-weight",
+            "300",
+            "--total-timesteps",
+            str(args.total_timesteps),
+            "--seed",
+            str(args.seed),
+        ]
         argv_one += ["--out", str(args.out / "models"), "--name", model, "--no-progress-bar"]
         argv_one += ["--checkpoint-every", "0"]
         t0 = time.perf_counter()

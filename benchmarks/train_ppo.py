@@ -39,7 +39,7 @@ class Args:
     agents/models: replace them only with an explicit ``--out agents/models``)."""
     name: str = "model"
     """File name of the model (``NAME.zip``, ``NAME.json``)."""
-    total_timesteps: int = 3_000_000
+    total_timesteps: int = 4_000_000
     """Env steps to train for, over all copies; rounded up to whole rollouts of
     ``n_steps x num_envs`` env steps (PPO updates after each rollout)."""
     num_envs: int = 64
@@ -56,7 +56,7 @@ class Args:
     """Comma list of epsilon [the severity's unit], one drawn per episode (the paper's Table II)."""
     conditioned: bool = True
     """Show the policy epsilon and the uncertainty (agents.ppo.FeatureSpec)."""
-    prediction: bool = False
+    prediction: bool = True
     """Also show the object's predicted means and truncation boxes over the horizon."""
     forward_only: bool = True
     """Map the policy's actions to speeds v >= 0 (no reversing: unrestricted, PPO found reversing
@@ -70,9 +70,9 @@ class Args:
     paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
     w_path_error: float = 1.0
     """Reward per unit of the path error ||e_{k+1}|| (subtracted)."""
-    w_progress: float = 1.0
+    w_progress: float = 2.0
     """Reward per m of progress along the path (lambda_{k+1} - lambda_k)."""
-    w_goal: float = 10.0
+    w_goal: float = 30.0
     """Reward on reaching the goal."""
     cost_scale: float = 1000.0
     """Risk above epsilon per unit of cost [the severity's unit]."""
