@@ -1,15 +1,18 @@
-"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk penalty (stable-baselines3).
+"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk cost (stable-baselines3).
 
-    python -m benchmarks.train_ppo --out agents/models --name ppo_penalty          # the shipped policies
-    python -m benchmarks.train_ppo --lagrangian --risk-weight 20 --out agents/models --name ppo_lagrangian
+    python -m benchmarks.train_ppo --lagrangian --seeds 5 --out agents/models --name ppo_lagrangian
+    python -m benchmarks.train_ppo --out agents/models --name ppo_penalty      # the shipped policies
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
-Reward per step: ``-||e_{k+1}|| - beta * cost`` with cost = the env's risk R_{k+1|k} (the
-``reward_risk_weight`` of the env). ``--lagrangian`` adapts beta after every rollout by dual
-ascent, ``beta <- max(0, beta + dual_lr (mean episode cost - cost_limit))``. Writes
-``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits, wall time and training
-throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's CSV log in ``OUT/NAME_logs``;
-:meth:`agents.ppo.PPOAgent.load` reads the model back.
+The copies are split over the uncertainty levels and draw epsilon per episode; the policy is
+told both (:class:`agents.ppo.FeatureSpec`). Reward per step (:class:`agents.ppo_env.RewardWeights`):
+``-w_e ||e_{k+1}|| + w_p (lambda_{k+1} - lambda_k) + w_g [goal] - beta c_k``, with the cost
+``c_k = max(0, R_{k+1|k} - epsilon) / cost_scale + collision_cost [collision]``. ``--lagrangian``
+adapts beta after every rollout by dual ascent, ``beta <- max(0, beta + dual_lr (mean episode
+cost - cost_limit))``. Writes ``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits,
+features, wall time and training throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's
+CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.PPOAgent.load` reads the model back. ``--seeds N``
+trains N seeds, scores them and ships the best (:func:`train_seeds`).
 """
 
 from __future__ import annotations

@@ -161,6 +161,8 @@ def ppo_training() -> str:
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for path in sorted((ROOT / "agents" / "models").glob("*.json")):
+        if path.stem.endswith("_seeds"):  # the seeds' scores, not a policy's record
+            continue
         meta = json.loads(path.read_text())
         last = meta.get("final_rollout", {})
         args = meta["args"]
