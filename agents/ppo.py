@@ -5,6 +5,9 @@ training (as Gymnasium vector wrappers) and by :class:`PPOAgent`:
 
 - :func:`features`: the observation -> 14 scaled features in the ego's frame (path
   error, own input, the object's relative position, heading and velocity, distance, progress);
+  :class:`FeatureSpec` adds the episode's :class:`Context` (the risk tolerance epsilon on a log
+  scale and the uncertainty's growth per step) and, optionally, the object's prediction over the
+  horizon (means and truncation boxes in the ego's frame);
 - :func:`to_inputs`: the policy's action in [-1, 1]^2 -> the change of ``(v, omega)`` within one
   step's rate limits (``accel_max dt``, ``omega_rate_max dt``), clipped to the input limits, so a
   learned policy obeys the same rate limits as the MPCs.
@@ -15,6 +18,7 @@ Needs the ``rl`` extra (``pip install "riskcrossing[rl]"``: torch CPU and stable
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,6 +27,9 @@ import numpy as np
 
 from agents.base import as_batch
 from risk_env import observation as layout
+from risk_env.dynamics import unicycle_step
+from risk_env.ops import NUMPY
+from risk_env.parts import Uncertainty
 from risk_env.scenario import Scenario
 
 FEATURES = 14
@@ -80,6 +87,81 @@ def features(obs: np.ndarray) -> np.ndarray:
     return out[0] if single else out
 
 
+EPSILON_UNIT = 500.0
+"""epsilon's feature is ``log1p(epsilon / EPSILON_UNIT) / log1p(5)`` [epsilon in the training
+severity's unit, J by default]: 0 at epsilon = 0, 1 at the paper's largest tolerance 2500 J."""
+CONTEXT_SIZE = 6
+"""Columns of a context array: epsilon's feature, the c1 sigma growth [m/step], the box growth
+(c1, c2) [m/step], the box half widths at the measurement (c1, c2) [m]."""
+
+
+@dataclass(frozen=True)
+class Context:
+    """What a tolerance-conditioned policy is told about its episode: epsilon and the uncertainty."""
+
+    epsilon: float
+    """The risk tolerance [the severity's unit]."""
+    uncertainty: Uncertainty
+    """The object's prediction model (the Table I level)."""
+
+    def array(self) -> np.ndarray:
+        """The context as one row ``(CONTEXT_SIZE,)``."""
+        u = self.uncertainty
+        eps = math.log1p(max(self.epsilon, 0.0) / EPSILON_UNIT) / math.log1p(5.0)
+        return np.array([eps, u.sigma_growth[0], *u.box_growth[:2], *u.box_half_width0], dtype=float)
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """Which features a policy sees: the 14 of :func:`features`, the context's 3 (epsilon, sigma
+    growth / 1.5 m, box growth / 3 m) and with ``prediction`` the object's predicted mean (ego
+    frame, / 20 m) and its truncation box's half extents along the ego's axes (/ 10 m) at each
+    of ``steps``."""
+
+    prediction: bool = False
+    dt: float = 0.5
+    """Step length [s] of the prediction."""
+    steps: tuple[int, ...] = (2, 4, 6)
+    """Prediction steps n whose mean and box the policy sees."""
+
+    @property
+    def size(self) -> int:
+        """Length of the feature vector."""
+        return FEATURES + 3 + (4 * len(self.steps) if self.prediction else 0)
+
+    def __call__(self, obs: np.ndarray, context: np.ndarray) -> np.ndarray:
+        """Features ``(B, size)`` float32 of observations ``(B, 10 + 6 K)`` and contexts
+        ``(B, CONTEXT_SIZE)`` (or ``(size,)`` of one observation and one context row)."""
+        o = np.asarray(obs, dtype=float)
+        single = o.ndim == 1
+        o = np.atleast_2d(o)
+        ctx = np.broadcast_to(np.asarray(context, dtype=float), (len(o), CONTEXT_SIZE))
+        parts = [features(o), (ctx[:, :3] / np.array([1.0, 1.5, 3.0])).astype(np.float32)]
+        if self.prediction:
+            parts.append(self._prediction(o, ctx))
+        out = np.concatenate(parts, axis=1)
+        return out[0] if single else out
+
+    def _prediction(self, o: np.ndarray, ctx: np.ndarray) -> np.ndarray:
+        """``(B, 4 len(steps))``: per step n, the predicted mean in the ego's frame and the box's
+        half extents along the ego's axes (the c1/c2 box rotated into the ego's frame)."""
+        x, y, theta = o[:, layout.EGO_POSE].T
+        c, s = np.cos(theta), np.sin(theta)
+        table = o[:, layout.EGO_SIZE :].reshape(len(o), layout.slot_count(o.shape[1]), layout.SLOT_SIZE)
+        first = table[np.arange(len(o)), np.argmax(table[:, :, 0] == 1.0, axis=1)]
+        ox, oy, oth, ov, ow = first[:, 1:6].T
+        out, n_prev = [], 0
+        for n in self.steps:
+            for _ in range(n - n_prev):
+                ox, oy, oth = unicycle_step(ox, oy, oth, ov, ow, self.dt, NUMPY)
+            n_prev = n
+            hx, hy = ctx[:, 4] + n * ctx[:, 2], ctx[:, 5] + n * ctx[:, 3]
+            dx, dy = ox - x, oy - y
+            out += [(c * dx + s * dy) / 20.0, (-s * dx + c * dy) / 20.0]
+            out += [(np.abs(c) * hx + np.abs(s) * hy) / 10.0, (np.abs(s) * hx + np.abs(c) * hy) / 10.0]
+        return np.stack(out, axis=1).astype(np.float32)
+
+
 def first_object(obs: np.ndarray) -> tuple[np.ndarray, ...]:
     """``(c1, c2, theta, v)`` ``(B,)`` each of the first present object of observations ``(B, 10 + 6 K)``."""
     table = obs[:, layout.EGO_SIZE :].reshape(len(obs), layout.slot_count(obs.shape[1]), layout.SLOT_SIZE)
@@ -104,9 +186,11 @@ class InputLimits:
     """Largest turn-rate change per step [rad/s] (omega_rate_max dt)."""
 
     @classmethod
-    def of(cls, scenario: Scenario) -> InputLimits:
+    def of(cls, scenario: Scenario, forward_only: bool = False) -> InputLimits:
+        """The limits of ``scenario``'s ego; ``forward_only``: no reversing (v >= 0)."""
         e = scenario.ego
-        return cls(e.v_min, e.v_max, e.omega_max, e.accel_max * scenario.dt, e.omega_rate_max * scenario.dt)
+        v_min = max(e.v_min, 0.0) if forward_only else e.v_min
+        return cls(v_min, e.v_max, e.omega_max, e.accel_max * scenario.dt, e.omega_rate_max * scenario.dt)
 
 
 def to_inputs(action: np.ndarray, last_input: np.ndarray, limits: InputLimits) -> np.ndarray:
@@ -127,9 +211,20 @@ class PPOAgent:
     units ``(2,)`` or ``(B, 2)``, within the scenario's input and rate limits.
     """
 
-    def __init__(self, model: Any, limits: InputLimits, metadata: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        model: Any,
+        limits: InputLimits,
+        metadata: dict[str, Any] | None = None,
+        spec: FeatureSpec | None = None,
+        context: Context | None = None,
+    ) -> None:
         self.model = model
         self.limits = limits
+        self.spec = spec
+        """The conditioned features the policy sees; None: the 14 of :func:`features` alone."""
+        self.context = context
+        """The episode's epsilon and uncertainty told to a conditioned policy (``spec`` not None)."""
         self.metadata: dict[str, Any] = dict(metadata or {})
         """How the policy was trained (the training arguments, wall time, steps/s), as saved."""
         self.last_solve = None
@@ -139,7 +234,10 @@ class PPOAgent:
     def load(cls, path: str | Path, scenario: Scenario | None = None) -> PPOAgent:
         """Load ``path`` (an SB3 ``.zip``) and its ``.json`` metadata beside it.
 
-        The input limits are the saved ones, or ``scenario``'s when given (a different car).
+        The input limits are the saved ones, or ``scenario``'s when given (a different car). A
+        tolerance-conditioned policy (metadata ``feature_spec``) is told ``scenario``'s epsilon and
+        uncertainty (without a scenario: epsilon 0 and the medium level); its severity must be the
+        one it was trained with, since epsilon is read in that unit.
         """
         from stable_baselines3 import PPO
 
@@ -152,17 +250,35 @@ class PPOAgent:
         meta_path = zip_path.with_suffix(METADATA_SUFFIX)
         metadata = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
         if scenario is not None:
-            limits = InputLimits.of(scenario)
+            limits = InputLimits.of(scenario, bool(metadata.get("args", {}).get("forward_only", False)))
         elif "limits" in metadata:
             limits = InputLimits(**metadata["limits"])
         else:
             raise ValueError(f"{meta_path} is missing: pass scenario= to set the input limits")
-        if metadata.get("features", FEATURES) != FEATURES:
+        spec = (
+            FeatureSpec(**{**metadata["feature_spec"], "steps": tuple(metadata["feature_spec"]["steps"])})
+            if "feature_spec" in metadata
+            else None
+        )
+        expected = FEATURES if spec is None else spec.size
+        if metadata.get("features", FEATURES) != expected:
             raise ValueError(
-                f"{zip_path} was trained on {metadata['features']} features; this version has {FEATURES}"
+                f"{zip_path} was trained on {metadata['features']} features; this version has {expected}"
             )
+        context = None
+        if spec is not None:
+            trained = metadata.get("args", {}).get("severity", "paper")
+            if scenario is None:
+                context = Context(0.0, Uncertainty.preset("medium"))
+            elif scenario.severity != trained:
+                raise ValueError(
+                    f"{zip_path} reads epsilon in the {trained!r} severity's unit; the scenario's"
+                    f" severity is {scenario.severity!r}"
+                )
+            else:
+                context = Context(scenario.risk_tolerance, scenario.uncertainty)
         model = PPO.load(zip_path, device="cpu")
-        return cls(model, limits, metadata)
+        return cls(model, limits, metadata, spec, context)
 
     def reset(self) -> None:
         """Nothing to reset (the policy is memoryless); for the rollout loop's sake."""
@@ -180,6 +296,10 @@ class PPOAgent:
         obs, single = as_batch(observation, size)
         if not np.all(np.isfinite(obs)):
             raise ValueError(f"observation has non-finite entries: {observation}")
-        action, _ = self.model.predict(features(obs), deterministic=deterministic)
+        if self.spec is None or self.context is None:
+            seen = features(obs)
+        else:
+            seen = self.spec(obs, self.context.array())
+        action, _ = self.model.predict(seen, deterministic=deterministic)
         inputs = to_inputs(action, obs[:, layout.EGO_INPUT], self.limits)
         return (inputs[0] if single else inputs), None

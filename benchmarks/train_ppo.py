@@ -1,15 +1,18 @@
-"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk penalty (stable-baselines3).
+"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk cost (stable-baselines3).
 
-    python -m benchmarks.train_ppo --out agents/models --name ppo_penalty          # the shipped policies
-    python -m benchmarks.train_ppo --lagrangian --risk-weight 20 --out agents/models --name ppo_lagrangian
+    python -m benchmarks.train_ppo --lagrangian --seeds 5 --out agents/models --name ppo_lagrangian
+    python -m benchmarks.train_ppo --out agents/models --name ppo_penalty      # the shipped policies
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
-Reward per step: ``-||e_{k+1}|| - beta * cost`` with cost = the env's risk R_{k+1|k} (the
-``reward_risk_weight`` of the env). ``--lagrangian`` adapts beta after every rollout by dual
-ascent, ``beta <- max(0, beta + dual_lr (mean episode cost - cost_limit))``. Writes
-``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits, wall time and training
-throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's CSV log in ``OUT/NAME_logs``;
-:meth:`agents.ppo.PPOAgent.load` reads the model back.
+The copies are split over the uncertainty levels and draw epsilon per episode; the policy is
+told both (:class:`agents.ppo.FeatureSpec`). Reward per step (:class:`agents.ppo_env.RewardWeights`):
+``-w_e ||e_{k+1}|| + w_p (lambda_{k+1} - lambda_k) + w_g [goal] - beta c_k``, with the cost
+``c_k = max(0, R_{k+1|k} - epsilon) / cost_scale + collision_cost [collision]``. ``--lagrangian``
+adapts beta after every rollout by dual ascent, ``beta <- max(0, beta + dual_lr (mean episode
+cost - cost_limit))``. Writes ``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits,
+features, wall time and training throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's
+CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.PPOAgent.load` reads the model back. ``--seeds N``
+trains N seeds, scores them and ships the best (:func:`train_seeds`).
 """
 
 from __future__ import annotations
@@ -39,32 +42,56 @@ class Args:
     agents/models: replace them only with an explicit ``--out agents/models``)."""
     name: str = "model"
     """File name of the model (``NAME.zip``, ``NAME.json``)."""
-    total_timesteps: int = 3_000_000
+    total_timesteps: int = 4_000_000
     """Env steps to train for, over all copies; rounded up to whole rollouts of
     ``n_steps x num_envs`` env steps (PPO updates after each rollout)."""
     num_envs: int = 64
     """Copies of the env stepped as one batch."""
     seed: int = 0
     """Seed of the env copies, the policy's initialisation and its sampling."""
-    uncertainty: str = "medium"
-    """The paper's uncertainty preset the policy trains against."""
-    severity: str = "probability"
-    """Severity of the training cost (the collision probability by default: a bounded cost, and
-    no free collisions at matched kinetic energy as with the paper's severity)."""
+    seeds: int = 1
+    """Train this many seeds (seed, seed + 1, ...): each is saved as ``OUT/NAME_seeds/NAME_seedS``
+    and scored on sampled motion (``--eval-episodes``); the table of mean +- std goes to
+    ``OUT/NAME_seeds.md`` (and ``.json``) and the best seed is copied to ``OUT/NAME.zip``."""
+    uncertainty: str = "low,medium,high"
+    """Comma list of the uncertainty presets trained on: the copies are split evenly over them."""
+    tolerances: str = "0,500,1000,1500,2000,2500"
+    """Comma list of epsilon [the severity's unit], one drawn per episode (the paper's Table II)."""
+    conditioned: bool = True
+    """Show the policy epsilon and the uncertainty (agents.ppo.FeatureSpec)."""
+    prediction: bool = True
+    """Also show the object's predicted means and truncation boxes over the horizon."""
+    forward_only: bool = True
+    """Map the policy's actions to speeds v >= 0 (no reversing: unrestricted, PPO found reversing
+    to the goal with the ego turned around, a local optimum of the path error)."""
+    severity: str = "paper"
+    """Severity of the risk in the cost (the paper's, in J, as Table II's epsilon)."""
     object_motion: str = "sampled"
     """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
-    randomize: bool = True
-    """Train on seeded variations of the scenario (curvature, starts, object speed)."""
-    risk_weight: float = 1000.0
+    randomize: bool = False
+    """Train on seeded variations of the scenario (curvature, starts, object speed); off: the
+    paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
+    w_path_error: float = 1.0
+    """Reward per unit of the path error ||e_{k+1}|| (subtracted)."""
+    w_progress: float = 2.0
+    """Reward per m of progress along the path (lambda_{k+1} - lambda_k)."""
+    w_goal: float = 30.0
+    """Reward on reaching the goal."""
+    cost_scale: float = 1000.0
+    """Risk above epsilon per unit of cost [the severity's unit]."""
+    collision_cost: float = 1.0
+    """Cost of a collision [cost units]."""
+    risk_weight: float = 300.0
     """beta: the penalty per unit of cost (the initial value with --lagrangian)."""
-    penalty_warmup: int = 500_000
+    penalty_warmup: int = 0
     """Env steps at beta = 0 before the penalty switches on (without --lagrangian): the policy
     first learns to drive, then to keep the risk down."""
     lagrangian: bool = False
     """Adapt beta by dual ascent toward cost_limit."""
     cost_limit: float = 0.02
-    """Per-episode cost the Lagrangian aims at [units of the severity, summed over the episode]."""
-    dual_lr: float = 100.0
+    """Per-episode cost the Lagrangian aims at: the mean over the rollout's finished episodes of
+    sum_k c_k (agents.ppo_env.RewardWeights: a collision counts collision_cost)."""
+    dual_lr: float = 5.0
     """Step size of the dual ascent on beta [beta per unit of episode cost]."""
     n_steps: int = 128
     """Rollout length per copy between updates."""
@@ -90,6 +117,10 @@ class Args:
     """Save a checkpoint every this many env steps (0: none)."""
     progress_bar: bool = True
     """Show a progress bar (needs rich, part of the rl extra)."""
+    eval_episodes: int = 512
+    """Episodes of each seed's evaluation (sampled motion, medium uncertainty, --eval-epsilon)."""
+    eval_epsilon: float = 0.0
+    """epsilon of the evaluation [the severity's unit]."""
 
 
 def field_help() -> dict[str, str]:
@@ -109,7 +140,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser = cli.parser("train_ppo", __doc__)
     helps = field_help()
     choices = {
-        "uncertainty": ("low", "medium", "high"),
         "severity": ("paper", "plastic", "probability"),
         "object_motion": ("paper", "sampled"),
     }
@@ -133,9 +163,33 @@ def parse_args(argv: list[str] | None = None) -> Args:
     parser = build_parser()
     args = Args(**vars(parser.parse_args(argv)))
     args.net_arch = tuple(args.net_arch)
-    if args.total_timesteps < 1 or args.num_envs < 1 or args.n_steps < 1:
-        parser.error("--total-timesteps, --num-envs and --n-steps must be >= 1")
+    if args.total_timesteps < 1 or args.num_envs < 1 or args.n_steps < 1 or args.seeds < 1:
+        parser.error("--total-timesteps, --num-envs, --n-steps and --seeds must be >= 1")
+    bad = [u for u in levels(args) if u not in ("low", "medium", "high")]
+    if bad or len(levels(args)) > args.num_envs:
+        parser.error(f"--uncertainty must list low, medium, high (at most --num-envs of them), got {bad}")
+    try:
+        tolerances(args)
+    except ValueError:
+        parser.error(f"--tolerances must be numbers, got {args.tolerances!r}")
     return args
+
+
+def levels(args: Args) -> list[str]:
+    """The uncertainty presets of ``--uncertainty``."""
+    return [u.strip() for u in args.uncertainty.split(",") if u.strip()]
+
+
+def tolerances(args: Args) -> list[float]:
+    """The epsilons of ``--tolerances``."""
+    return [float(t) for t in args.tolerances.split(",") if t.strip()]
+
+
+def feature_spec(args: Args, dt: float) -> Any:
+    """The :class:`agents.ppo.FeatureSpec` of the run (None: unconditioned, 14 features)."""
+    from agents.ppo import FeatureSpec
+
+    return FeatureSpec(prediction=args.prediction, dt=dt) if args.conditioned else None
 
 
 def planned_timesteps(args: Args) -> int:
@@ -149,27 +203,34 @@ def planned_timesteps(args: Args) -> int:
 
 
 def make_env(args: Args) -> Any:
-    """The wrapper stack: batched RiskCrossing-v0 -> PolicyView -> SB3 VecEnv -> VecMonitor
+    """The wrapper stack: batched RiskCrossing-v0 copies split over the levels (LevelMix) ->
+    PolicyView (features, epsilon per episode, the PPO reward) -> SB3 VecEnv -> VecMonitor
     (episode return, length, cost, collision, success) -> VecNormalize (rewards only)."""
-    import gymnasium as gym
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    import risk_env
     from agents.ppo import InputLimits
-    from agents.ppo_env import PolicyView, SB3VecEnv
+    from agents.ppo_env import LevelMix, PolicyView, RewardWeights, SB3VecEnv
 
-    env = gym.make_vec(
-        risk_env.ENV_ID,
-        num_envs=args.num_envs,
-        vectorization_mode="vector_entry_point",
-        autoreset_mode="same_step",
-        uncertainty=args.uncertainty,
+    env = LevelMix(
+        args.num_envs,
+        levels(args),
         severity=args.severity,
         object_motion=args.object_motion,
         randomize=args.randomize,
-        reward_risk_weight=0.0 if args.penalty_warmup > 0 and not args.lagrangian else args.risk_weight,
     )
-    view = PolicyView(env, InputLimits.of(env.unwrapped.base_scenario))
+    weights = RewardWeights(
+        args.w_path_error, args.w_progress, args.w_goal, args.cost_scale, args.collision_cost
+    )
+    beta = 0.0 if args.penalty_warmup > 0 and not args.lagrangian else args.risk_weight
+    view = PolicyView(
+        env,
+        InputLimits.of(env.base_scenario, args.forward_only),
+        feature_spec(args, env.base_scenario.dt),
+        weights,
+        tolerances(args),
+        risk_weight=beta,
+        seed=args.seed,
+    )
     venv = VecMonitor(SB3VecEnv(view), info_keywords=SB3VecEnv.EPISODE_KEYS)
     return VecNormalize(venv, norm_obs=False, norm_reward=args.normalize_reward, gamma=args.gamma)
 
@@ -186,9 +247,14 @@ def make_callbacks(args: Args) -> list[Any]:
             super().__init__()
             self.episodes: list[dict[str, float]] = []
             self.history: list[dict[str, float]] = []
+            self.terms: dict[str, float] = {}
+            self.steps = 0
 
         def _on_step(self) -> bool:
             for done, info in zip(self.locals["dones"], self.locals["infos"]):
+                for key, value in info["rewards"].items():
+                    self.terms[key] = self.terms.get(key, 0.0) + float(value)
+                self.steps += 1
                 if done:
                     self.episodes.append(
                         {k: float(info[k]) for k in ("episode_cost", "collision", "is_success")}
@@ -196,10 +262,13 @@ def make_callbacks(args: Args) -> list[Any]:
             return True
 
         def _on_rollout_end(self) -> None:
-            beta = float(self.training_env.get_attr("reward_risk_weight")[0])
+            for key, total in self.terms.items():  # each reward term, mean per env step
+                self.logger.record(f"reward/{key}", total / max(self.steps, 1))
+            self.terms, self.steps = {}, 0
+            beta = float(self.training_env.get_attr("risk_weight")[0])
             if not args.lagrangian and self.num_timesteps >= args.penalty_warmup and beta != args.risk_weight:
                 beta = args.risk_weight  # the warm-up is over: the fixed penalty switches on
-                self.training_env.set_attr("reward_risk_weight", beta)
+                self.training_env.set_attr("risk_weight", beta)
             if not self.episodes:
                 return
             stats = {k: float(np.mean([e[k] for e in self.episodes])) for k in self.episodes[0]}
@@ -209,7 +278,7 @@ def make_callbacks(args: Args) -> list[Any]:
             self.logger.record("risk/beta", beta)
             if args.lagrangian:
                 beta = max(0.0, beta + args.dual_lr * (stats["episode_cost"] - args.cost_limit))
-                self.training_env.set_attr("reward_risk_weight", beta)
+                self.training_env.set_attr("risk_weight", beta)
             self.history.append({**stats, "beta": beta, "timesteps": float(self.num_timesteps)})
             self.episodes = []
 
@@ -236,6 +305,7 @@ def train(args: Args) -> dict[str, Any]:
     args.out.mkdir(parents=True, exist_ok=True)
     venv = make_env(args)
     venv.seed(args.seed)
+    spec = feature_spec(args, venv.get_attr("base_scenario")[0].dt)
     model = PPO(
         "MlpPolicy",
         venv,
@@ -259,8 +329,9 @@ def train(args: Args) -> dict[str, Any]:
     history = callbacks[0].history
     metadata = {
         "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(args).items()},
-        "limits": dataclasses.asdict(InputLimits.of(venv.get_attr("base_scenario")[0])),
-        "features": FEATURES,
+        "limits": dataclasses.asdict(InputLimits.of(venv.get_attr("base_scenario")[0], args.forward_only)),
+        "features": FEATURES if spec is None else spec.size,
+        **({} if spec is None else {"feature_spec": dataclasses.asdict(spec)}),
         "timesteps": int(model.num_timesteps),
         "wall_time_s": round(wall, 1),
         "steps_per_s": round(model.num_timesteps / wall, 1),
@@ -275,8 +346,43 @@ def train(args: Args) -> dict[str, Any]:
     return metadata
 
 
+def train_seeds(args: Args) -> dict[str, Any]:
+    """Train ``args.seeds`` seeds, score each (:func:`benchmarks.ppo_eval.evaluate`), write the
+    table ``OUT/NAME_seeds.md`` (and ``.json``) and copy the best seed to ``OUT/NAME.zip``/``.json``."""
+    import shutil
+
+    from benchmarks.ppo_eval import best_seed, evaluate, seed_table
+
+    results: dict[int, dict[str, float]] = {}
+    folder = args.out / f"{args.name}_seeds"
+    walls: dict[int, dict[str, float]] = {}
+    for seed in range(args.seed, args.seed + args.seeds):
+        folder = args.out / f"{args.name}_seeds"
+        one = dataclasses.replace(args, seed=seed, seeds=1, name=f"{args.name}_seed{seed}", out=folder)
+        meta = train(one)
+        walls[seed] = {"wall_time_s": meta["wall_time_s"], "steps_per_s": meta["steps_per_s"]}
+        results[seed] = evaluate(
+            folder / f"{one.name}.zip", args.eval_episodes, "medium", args.eval_epsilon, seed=0
+        )
+        print(f"seed {seed}: " + ", ".join(f"{k} {v:.4g}" for k, v in results[seed].items()))
+    best = best_seed(results, args.cost_limit)
+    for suffix in (".zip", ".json"):
+        shutil.copyfile(folder / f"{args.name}_seed{best}{suffix}", args.out / f"{args.name}{suffix}")
+    header = (
+        f"{args.name}: {args.seeds} seeds x {planned_timesteps(args):,} env steps; each scored on"
+        f" {args.eval_episodes} episodes (seeds 0..{args.eval_episodes - 1}), sampled motion, medium"
+        f" uncertainty, epsilon {args.eval_epsilon:g}; shipped: seed {best}"
+    )
+    table = seed_table(results, best, header)
+    (args.out / f"{args.name}_seeds.md").write_text(table)
+    summary = {"best": best, "results": results, "training": walls}
+    (args.out / f"{args.name}_seeds.json").write_text(json.dumps(summary, indent=2) + "\n")
+    print(table)
+    return summary
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    """Parse the command line, say how many env steps will be trained, and train."""
+    """Parse the command line, say how many env steps will be trained, and train (every seed)."""
     args = parse_args(argv)
     planned = planned_timesteps(args)
     if planned != args.total_timesteps:
@@ -285,7 +391,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             f" of n_steps x num_envs = {args.n_steps} x {args.num_envs} = {args.n_steps * args.num_envs}"
             " env steps"
         )
-    return train(args)
+    return train(args) if args.seeds == 1 else train_seeds(args)
 
 
 if __name__ == "__main__":

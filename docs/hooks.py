@@ -161,6 +161,8 @@ def ppo_training() -> str:
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for path in sorted((ROOT / "agents" / "models").glob("*.json")):
+        if path.stem.endswith("_seeds"):  # the seeds' training times, below their shipped policy
+            continue
         meta = json.loads(path.read_text())
         last = meta.get("final_rollout", {})
         args = meta["args"]
@@ -173,6 +175,13 @@ def ppo_training() -> str:
             f" {meta['steps_per_s']:,.0f} | {cost:.3f} / {collisions:.1f} % / {goal:.0f} % |"
             f" {beta:.0f} ({how}) |"
         )
+        seeds = path.with_name(f"{path.stem}_seeds.json")
+        if seeds.is_file():
+            for seed, t in json.loads(seeds.read_text())["training"].items():
+                rows.append(
+                    f"| `{path.stem}`, seed {seed} | {meta['timesteps']:,} | {t['wall_time_s']:.1f} |"
+                    f" {t['steps_per_s']:,.0f} | | |"
+                )
     return "\n".join(rows)
 
 

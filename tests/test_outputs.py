@@ -21,6 +21,7 @@ COMMANDS = (
     "env_speed",
     "vector_speed",
     "train_ppo",
+    "ppo_study",
     "highway_render",
     "highway_intersection",
 )
@@ -88,7 +89,7 @@ def test_train_ppo_says_when_it_rounds(monkeypatch, capsys):
 
 def test_the_main_jobs_summary_fits_on_a_screen_and_explains_every_failure():
     """The committed full run: every claim that does not hold gets a why and a docs section; so do
-    the grid RMPC's failed solves and the PPO rows that never change."""
+    the grid RMPC's failed solves."""
     rows = load_rows(ROOT / "docs" / "results" / "table2.csv")
     meta = json.loads((ROOT / "docs" / "results" / "table2_meta.json").read_text())
     claims = table2.check_claims(rows)
@@ -109,7 +110,9 @@ def test_the_main_jobs_summary_fits_on_a_screen_and_explains_every_failure():
     grid_failures = sum(r["failed_solves"] for r in grid)
     assert grid_failures > 0
     assert f"RMPC grid: {grid_failures} failed solves" in text and summary.ANCHORS["grid"] in text
-    assert "PPO penalty and lagrangian: each the same in all 18 configurations" in text
+    assert "each the same in all" not in text  # the PPO rows vary: the policies see epsilon and the level
+    ppo = [r for r in rows if r["method"] == "PPO"]
+    assert len({(r["e_acc"], r["d_min"]) for r in ppo}) > 2
     assert "Written to results/: table2.md" in text
 
 

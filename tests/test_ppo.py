@@ -16,8 +16,9 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 import risk_env  # noqa: E402
-from agents.ppo import FEATURES, InputLimits, PPOAgent, features, to_inputs  # noqa: E402
-from agents.ppo_env import PolicyView, SB3VecEnv  # noqa: E402
+from agents.ppo import FEATURES, Context, FeatureSpec, InputLimits, PPOAgent, features, to_inputs  # noqa: E402
+from agents.ppo_env import TERMS, LevelMix, PolicyView, RewardWeights, SB3VecEnv  # noqa: E402
+from benchmarks.ppo_eval import best_seed, seed_table  # noqa: E402
 from benchmarks.rollout import rollout  # noqa: E402
 from risk_env import Scenario, observation  # noqa: E402
 
@@ -85,8 +86,8 @@ def _episode_observations() -> np.ndarray:
 
 @pytest.mark.parametrize("name", ["ppo_penalty", "ppo_lagrangian"])
 def test_shipped_policies_see_what_they_saw_before_the_object_slots(name: str) -> None:
-    """On single-object scenes the features are bit for bit those of the old layout, so the
-    shipped policies act exactly as they were trained to."""
+    """On single-object scenes the 14 base features are bit for bit those of the old layout, and
+    the shipped policies see them followed by their context."""
     obs = _episode_observations()
     assert obs.shape[1] == observation.SIZE and len(obs) > 200
     old = obs[:, _OLD_ORDER]
@@ -94,7 +95,11 @@ def test_shipped_policies_see_what_they_saw_before_the_object_slots(name: str) -
     for row, before in zip(obs[:20], old[:20], strict=True):
         assert features(row).tobytes() == _features_before(before)[0].tobytes()
     agent = PPOAgent.load(SHIPPED / f"{name}.zip")
-    action, _ = agent.model.predict(_features_before(old), deterministic=True)
+    assert agent.spec is not None and agent.context is not None  # conditioned on epsilon and the level
+    seen = np.concatenate(
+        [_features_before(old), agent.spec(obs, agent.context.array())[:, FEATURES:]], axis=1
+    )
+    action, _ = agent.model.predict(seen, deterministic=True)
     expected = to_inputs(action, old[:, 3:5], agent.limits)
     np.testing.assert_array_equal(agent.predict(obs)[0], expected)
     # a second slot (absent, or a second object) changes nothing: the policy reads the first object
@@ -133,8 +138,8 @@ def test_sb3_view_reports_episode_cost_and_terminal_observation() -> None:
             running[i] = 0.0
             finished += 1
     assert finished >= 4
-    venv.set_attr("reward_risk_weight", 3.0)
-    assert venv.get_attr("reward_risk_weight") == [3.0] * 4
+    venv.set_attr("risk_weight", 3.0)
+    assert venv.get_attr("risk_weight") == [3.0] * 4
     with pytest.raises(ValueError, match="same-step"):
         SB3VecEnv(gym.make_vec(risk_env.ENV_ID, num_envs=2))
 
@@ -182,3 +187,95 @@ def test_shipped_policy_reaches_the_goal_without_collision(name: str, uncertaint
     record = rollout(agent, gym.make(risk_env.ENV_ID, uncertainty=uncertainty), seed=0)
     assert record.success and not record.collision
     assert np.all(np.abs(np.diff(record.actions[:, 0])) <= agent.limits.dv_max + 1e-5)  # obs holds float32
+
+
+def test_prediction_features_in_the_egos_frame() -> None:
+    """An object 20 m ahead driving toward the ego at 2 m/s: its predicted mean comes closer by
+    1 m per step (dt 0.5 s), its box grows by Delta per step on each axis."""
+    obs = np.zeros(observation.SIZE)
+    obs[observation.EGO_POSE] = (0.0, 0.0, math.pi / 2)  # heading north
+    obs[observation.PRESENT] = 1.0
+    obs[observation.OBJECT] = (0.0, 20.0, -math.pi / 2, 2.0, 0.0)
+    spec = FeatureSpec(prediction=True, dt=0.5, steps=(2, 4))
+    ctx = Context(2500.0, Scenario.preset("high").uncertainty).array()
+    f = spec(obs, ctx)
+    assert f.shape == (spec.size,) == (FEATURES + 3 + 8,)
+    np.testing.assert_allclose(f[FEATURES : FEATURES + 3], (1.0, 1.5 / 1.5, 3.0 / 3.0), atol=1e-6)
+    pred = f[FEATURES + 3 :].reshape(2, 4) * np.array([20.0, 20.0, 10.0, 10.0])
+    np.testing.assert_allclose(pred, [[18.0, 0.0, 6.0, 6.0], [16.0, 0.0, 12.0, 12.0]], atol=1e-4)
+    zero = Context(0.0, Scenario.preset("low").uncertainty).array()
+    assert zero[0] == 0.0 and spec(np.stack([obs, obs]), zero).shape == (2, spec.size)
+
+
+def test_policy_view_reward_terms_and_epsilon_per_episode() -> None:
+    """The reward is the sum of the named terms; progress is the change of lambda; each copy's
+    epsilon comes from the tolerances and is redrawn when its episode ends; the levels split."""
+    env = LevelMix(6, ["low", "high"], max_steps=12, randomize=True)
+    assert env.sizes == [3, 3] and [u.box_growth[0] for u in env.uncertainties] == [1.0] * 3 + [3.0] * 3
+    spec = FeatureSpec(prediction=True, dt=env.base_scenario.dt)
+    weights = RewardWeights(path_error=1.0, progress=2.0, goal=5.0, cost_scale=100.0, collision=1.0)
+    view = PolicyView(env, InputLimits.of(env.base_scenario), spec, weights, (0.0, 2500.0), risk_weight=3.0)
+    obs, info = view.reset(seed=1)
+    assert obs.shape == (6, spec.size) and set(view.epsilon) <= {0.0, 2500.0}
+    np.testing.assert_allclose(obs[:, FEATURES], np.where(view.epsilon > 0, 1.0, 0.0), atol=1e-6)
+    lam = info["lambda"].copy()
+    ended = 0
+    for _ in range(30):
+        eps = view.epsilon.copy()
+        obs, reward, terminated, truncated, info = view.step(np.ones((6, 2), dtype=np.float32) * [1.0, 0.0])
+        done = terminated | truncated
+        final = info.get("final_info", info)
+        terms = info["rewards"]
+        assert set(terms) == set(TERMS)
+        np.testing.assert_allclose(reward, sum(terms.values()))
+        last_lam = np.where(done, final["lambda"], info["lambda"])
+        np.testing.assert_allclose(terms["progress"], 2.0 * (last_lam - lam))
+        cost = np.maximum(np.where(done, final["risk"], info["risk"]) - eps, 0.0) / 100.0
+        cost += np.where(done, final["collision"], info["collision"])
+        np.testing.assert_allclose(terms["cost"], -3.0 * cost)
+        np.testing.assert_allclose(terms["goal"], 5.0 * np.where(done, final["is_success"], False))
+        for i in np.flatnonzero(done):
+            assert info["final_obs"][i].shape == (spec.size,)
+            ended += 1
+        lam = info["lambda"].copy()
+    assert ended >= 6
+
+
+def test_agent_reads_epsilon_and_level_from_the_scenario(tmp_path: Path) -> None:
+    meta = _train(tmp_path, "--prediction")
+    assert meta["features"] == FeatureSpec(prediction=True).size
+    env = gym.make(risk_env.ENV_ID, uncertainty="high", risk_tolerance=1500.0)
+    agent = PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=env.unwrapped.scenario)
+    assert agent.context == Context(1500.0, env.unwrapped.scenario.uncertainty)
+    assert agent.predict(env.reset(seed=0)[0])[0].shape == (2,)
+    other = gym.make(risk_env.ENV_ID, severity="probability", risk_tolerance=0.1)
+    with pytest.raises(ValueError, match="severity"):
+        PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
+
+
+def test_seed_table_and_best_seed() -> None:
+    results = {
+        0: {"e_acc": 80.0, "collision_rate": 0.01, "goal_rate": 0.9, "episode_cost": 0.01, "d_min": 9.0},
+        1: {"e_acc": 70.0, "collision_rate": 0.0, "goal_rate": 0.9, "episode_cost": 0.5, "d_min": 8.0},
+        2: {"e_acc": 90.0, "collision_rate": 0.0, "goal_rate": 0.95, "episode_cost": 0.0, "d_min": 9.5},
+    }
+    assert best_seed(results, cost_limit=0.02) == 2  # seed 1 breaks the cost limit
+    assert best_seed(results, cost_limit=1.0) == 2  # fewest collisions, then the goal rate
+    table = seed_table(results, 2, "header")
+    assert "| 2 (shipped) | 90.0 | 0.0% | 95.0% |" in table
+    assert "| mean ± std over 3 | 80.0 ± 10.0 | 0.3% ± 0.6% |" in table
+
+
+def test_seeds_train_score_and_ship_the_best(tmp_path: Path) -> None:
+    out = tmp_path / "ppo"
+    command = [sys.executable, "-m", "benchmarks.train_ppo", "--out", str(out), "--total-timesteps", "512"]
+    command += ["--num-envs", "4", "--n-steps", "64", "--batch-size", "128", "--no-progress-bar"]
+    command += ["--seeds", "2", "--eval-episodes", "6", "--checkpoint-every", "0"]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    summary = json.loads((out / "model_seeds.json").read_text())
+    assert set(summary["results"]) == {"0", "1"} and summary["best"] in (0, 1)
+    best = out / "model_seeds" / f"model_seed{summary['best']}.zip"
+    assert (out / "model.zip").read_bytes() == best.read_bytes()
+    table = (out / "model_seeds.md").read_text()
+    assert "mean ± std over 2" in table and f"| {summary['best']} (shipped) |" in table
