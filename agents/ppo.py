@@ -7,7 +7,8 @@ training (as Gymnasium vector wrappers) and by :class:`PPOAgent`:
   error, own input, the object's relative position, heading and velocity, distance, progress);
   :class:`FeatureSpec` adds the episode's :class:`Context` (the risk tolerance epsilon on a log
   scale and the uncertainty's growth per step) and, optionally, the object's prediction over the
-  horizon (means and truncation boxes in the ego's frame);
+  horizon (means and truncation boxes in the ego's frame); with ``slots`` K > 1 it shows every
+  object slot (:func:`slot_features`, each present object's prediction, absent slots zeroed);
 - :func:`to_inputs`: the policy's action in [-1, 1]^2 -> the change of ``(v, omega)`` within one
   step's rate limits (``accel_max dt``, ``omega_rate_max dt``), clipped to the input limits, so a
   learned policy obeys the same rate limits as the MPCs.
@@ -37,13 +38,15 @@ FEATURES = 14
 _SCALE = np.array([5.0, 5.0, 1.0, 4.0, 4.0, 0.8, 20.0, 20.0, 1.0, 1.0, 8.0, 8.0, 20.0, 100.0])
 """Divisors of the raw features [m, m, rad, m/s, m/s, rad/s, m, m, -, -, m/s, m/s, m, m]."""
 SHIPPED = Path(__file__).resolve().parent / "models"
-"""The trained policies that ship with the package: ``ppo_penalty`` and ``ppo_lagrangian``."""
+"""The trained policies that ship with the package: ``ppo_penalty``, ``ppo_lagrangian`` and
+``ppo_lagrangian_two_crossing`` (two object slots, trained with ``--scene two_crossing``)."""
 METADATA_SUFFIX = ".json"
 """A model ``policy.zip`` ships with ``policy.json``: the limits it acts within and how it was trained."""
 
 
 def shipped_model(variant: str) -> Path:
-    """The shipped policy of a training variant, ``"penalty"`` or ``"lagrangian"``."""
+    """The shipped policy of a training variant: ``"penalty"``, ``"lagrangian"`` or
+    ``"lagrangian_two_crossing"``."""
     path = SHIPPED / f"ppo_{variant}.zip"
     if not path.is_file():
         known = sorted(p.stem.removeprefix("ppo_") for p in SHIPPED.glob("ppo_*.zip"))
@@ -116,18 +119,29 @@ class FeatureSpec:
     """Which features a policy sees: the 14 of :func:`features`, the context's 3 (epsilon, sigma
     growth / 1.5 m, box growth / 3 m) and with ``prediction`` the object's predicted mean (ego
     frame, / 20 m) and its truncation box's half extents along the ego's axes (/ 10 m) at each
-    of ``steps``."""
+    of ``steps``.
+
+    With ``slots`` K > 1 the policy sees every slot instead of the first present object: the
+    ego's 7 of :func:`slot_features`, 8 per slot (flag and the object's 7), the context's 3, and
+    with ``prediction`` 4 ``len(steps)`` per slot; an absent slot's entries are all 0.
+    """
 
     prediction: bool = False
     dt: float = 0.5
     """Step length [s] of the prediction."""
     steps: tuple[int, ...] = (2, 4, 6)
     """Prediction steps n whose mean and box the policy sees."""
+    slots: int = 1
+    """K, the observation's object slots the policy is trained for (1: the first present object)."""
 
     @property
     def size(self) -> int:
-        """Length of the feature vector."""
-        return FEATURES + 3 + (4 * len(self.steps) if self.prediction else 0)
+        """Length of the feature vector: ``14 + 3 (+ 4 len(steps))`` with one slot, ``7 + 8 K + 3
+        (+ 4 len(steps) K)`` with K > 1."""
+        per_slot = 4 * len(self.steps) if self.prediction else 0
+        if self.slots == 1:
+            return FEATURES + 3 + per_slot
+        return EGO_FEATURES + SLOT_FEATURES * self.slots + 3 + per_slot * self.slots
 
     def __call__(self, obs: np.ndarray, context: np.ndarray) -> np.ndarray:
         """Features ``(B, size)`` float32 of observations ``(B, 10 + 6 K)`` and contexts
@@ -136,20 +150,35 @@ class FeatureSpec:
         single = o.ndim == 1
         o = np.atleast_2d(o)
         ctx = np.broadcast_to(np.asarray(context, dtype=float), (len(o), CONTEXT_SIZE))
-        parts = [features(o), (ctx[:, :3] / np.array([1.0, 1.5, 3.0])).astype(np.float32)]
-        if self.prediction:
-            parts.append(self._prediction(o, ctx))
-        out = np.concatenate(parts, axis=1)
+        scaled = (ctx[:, :3] / np.array([1.0, 1.5, 3.0])).astype(np.float32)
+        if self.slots == 1:
+            parts = [features(o), scaled]
+            if self.prediction:
+                table = slot_table(o)
+                first = table[np.arange(len(o)), np.argmax(table[:, :, 0] == 1.0, axis=1)]
+                parts.append(self._prediction(o, ctx, first[:, 1:6]))
+        else:
+            found = layout.slot_count(o.shape[1])
+            if found != self.slots:
+                raise ValueError(
+                    f"the policy was trained on {self.slots} object slots; the observation has {found}"
+                )
+            parts = [slot_features(o), scaled]
+            if self.prediction:
+                table = slot_table(o)
+                for i in range(self.slots):
+                    there = (table[:, i, 0] == 1.0)[:, None]
+                    parts.append(np.where(there, self._prediction(o, ctx, table[:, i, 1:6]), 0.0))
+        out = np.concatenate(parts, axis=1).astype(np.float32)
         return out[0] if single else out
 
-    def _prediction(self, o: np.ndarray, ctx: np.ndarray) -> np.ndarray:
-        """``(B, 4 len(steps))``: per step n, the predicted mean in the ego's frame and the box's
-        half extents along the ego's axes (the c1/c2 box rotated into the ego's frame)."""
+    def _prediction(self, o: np.ndarray, ctx: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """``(B, 4 len(steps))``: per step n, the predicted mean of the object measured ``(B, 5)``
+        (c1, c2, theta, v, omega) in the ego's frame and the box's half extents along the ego's
+        axes (the c1/c2 box rotated into the ego's frame)."""
         x, y, theta = o[:, layout.EGO_POSE].T
         c, s = np.cos(theta), np.sin(theta)
-        table = o[:, layout.EGO_SIZE :].reshape(len(o), layout.slot_count(o.shape[1]), layout.SLOT_SIZE)
-        first = table[np.arange(len(o)), np.argmax(table[:, :, 0] == 1.0, axis=1)]
-        ox, oy, oth, ov, ow = first[:, 1:6].T
+        ox, oy, oth, ov, ow = measured.T
         out, n_prev = [], 0
         for n in self.steps:
             for _ in range(n - n_prev):
@@ -162,9 +191,51 @@ class FeatureSpec:
         return np.stack(out, axis=1).astype(np.float32)
 
 
+def slot_table(obs: np.ndarray) -> np.ndarray:
+    """The object slots ``(B, K, 6)`` (flag, c1, c2, theta, v, omega) of observations ``(B, 10 + 6 K)``."""
+    return obs[:, layout.EGO_SIZE :].reshape(len(obs), layout.slot_count(obs.shape[1]), layout.SLOT_SIZE)
+
+
+EGO_FEATURES = 7
+"""Ego columns of :func:`slot_features`: path error (4), v, omega, progress."""
+SLOT_FEATURES = 8
+"""Columns per slot of :func:`slot_features`: flag, relative position (2), relative heading's
+cos and sin, relative velocity (2), distance."""
+
+
+def slot_features(obs: np.ndarray) -> np.ndarray:
+    """Scaled features ``(B, 7 + 8 K)`` float32 of observations ``(B, 10 + 6 K)``: the ego's 7
+    (path error, v, omega, progress; scaled as in :func:`features`), then per slot its flag and
+    the object's 7 of :func:`features` (ego frame), all 0 for an absent slot."""
+    o = np.atleast_2d(np.asarray(obs, dtype=float))
+    x, y, theta = o[:, layout.EGO_POSE].T
+    v, omega = o[:, layout.EGO_INPUT].T
+    c, s = np.cos(theta), np.sin(theta)
+    ego = np.stack((*(o[:, layout.PATH_ERROR].T), v, omega, o[:, layout.PROGRESS]), axis=-1)
+    parts = [ego / _SCALE[[0, 1, 2, 3, 4, 5, 13]]]
+    for row in np.moveaxis(slot_table(o), 1, 0):  # (B, 6) per slot
+        flag, ox, oy, otheta, ov = row[:, :5].T
+        dx, dy, rel = ox - x, oy - y, otheta - theta
+        raw = np.stack(
+            (
+                c * dx + s * dy,
+                -s * dx + c * dy,
+                np.cos(rel),
+                np.sin(rel),
+                ov * np.cos(rel) - v,
+                ov * np.sin(rel),
+                np.hypot(dx, dy),
+            ),
+            axis=-1,
+        )
+        there = (flag == 1.0)[:, None]
+        parts += [flag[:, None], np.where(there, raw / _SCALE[6:13], 0.0)]
+    return np.concatenate(parts, axis=1).astype(np.float32)
+
+
 def first_object(obs: np.ndarray) -> tuple[np.ndarray, ...]:
     """``(c1, c2, theta, v)`` ``(B,)`` each of the first present object of observations ``(B, 10 + 6 K)``."""
-    table = obs[:, layout.EGO_SIZE :].reshape(len(obs), layout.slot_count(obs.shape[1]), layout.SLOT_SIZE)
+    table = slot_table(obs)
     present = table[:, :, 0] == 1.0
     empty = ~present.any(axis=1)
     if empty.any():
@@ -206,9 +277,10 @@ def to_inputs(action: np.ndarray, last_input: np.ndarray, limits: InputLimits) -
 class PPOAgent:
     """A trained stable-baselines3 PPO policy with the MPC agents' ``predict`` API.
 
-    ``predict`` takes RiskCrossing-v0 observations ``(10 + 6 K,)`` or ``(B, 10 + 6 K)`` (any K;
-    the policy sees the first present object, :func:`features`) and returns inputs in physical
-    units ``(2,)`` or ``(B, 2)``, within the scenario's input and rate limits.
+    ``predict`` takes RiskCrossing-v0 observations ``(10 + 6 K,)`` or ``(B, 10 + 6 K)`` (a
+    one-slot policy: any K, it sees the first present object, :func:`features`; a policy trained
+    with K > 1 slots, ``spec.slots``: exactly that K) and returns inputs in physical units ``(2,)``
+    or ``(B, 2)``, within the scenario's input and rate limits.
     """
 
     def __init__(

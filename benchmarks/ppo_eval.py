@@ -26,7 +26,7 @@ def evaluate(
 ) -> dict[str, float]:
     """Mean e_acc (sum_k ||e_k||, k = 0..steps), collision and goal rates, the PPO cost per episode
     (:class:`agents.ppo_env.RewardWeights` with the policy's saved weights) and d_min [m] of
-    ``episodes`` deterministic episodes of the policy at ``path``."""
+    ``episodes`` deterministic episodes of the policy at ``path`` (in the scene it was trained on)."""
     import json
 
     import gymnasium as gym
@@ -47,6 +47,7 @@ def evaluate(
             risk_tolerance=epsilon,
             severity=train.get("severity", "paper"),
             object_motion="sampled",
+            scene=train.get("scene", "paper"),
         )
         scenario = env.unwrapped.base_scenario
         agent = PPOAgent.load(path, scenario=scenario)

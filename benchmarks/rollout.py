@@ -17,17 +17,24 @@ AGENTS: dict[str, tuple[str, str]] = {
     "smpc:monte_carlo": ("SMPC", "monte_carlo"),
     "ppo:penalty": ("PPO", "penalty"),
     "ppo:lagrangian": ("PPO", "lagrangian"),
+    "ppo:lagrangian_two_crossing": ("PPO", "lagrangian_two_crossing"),
 }
 """Benchmark names -> (method, variant): the risk estimator of an MPC, the training of a PPO policy."""
 
+SCENE_AGENTS: dict[str, str] = {"ppo:lagrangian_two_crossing": "two_crossing"}
+"""Agents that see every object slot of one scene (risk_env.scenes) and run there only: the PPO
+policy trained with ``--scene two_crossing`` (its observation has that scene's slot count)."""
 
-def available_agents() -> list[str]:
-    """The names of :data:`AGENTS` this installation can run (PPO needs the ``rl`` extra)."""
+
+def available_agents(scene: str = "paper") -> list[str]:
+    """The names of :data:`AGENTS` this installation can run in ``scene`` (PPO needs the ``rl``
+    extra; an agent of :data:`SCENE_AGENTS` runs in its scene only)."""
+    names = [a for a in AGENTS if SCENE_AGENTS.get(a, scene) == scene]
     try:
         import stable_baselines3  # noqa: F401
     except ImportError:
-        return [name for name, (method, _) in AGENTS.items() if method != "PPO"]
-    return list(AGENTS)
+        return [name for name in names if AGENTS[name][0] != "PPO"]
+    return names
 
 
 def build_agent(method: str, variant: str, env: gym.Env, seed: int = 0, **options: Any) -> Any:

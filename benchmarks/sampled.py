@@ -291,7 +291,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = build_parser()
     args = p.parse_args(argv)
     if args.agents is None:
-        args.agents = [a for a in available_agents() if a != "rmpc:grid"]
+        args.agents = [a for a in available_agents(args.scene) if a != "rmpc:grid"]
     else:
         args.agents = [a for a in args.agents.split(",") if a]
     if bad := [a for a in args.agents if a not in AGENTS]:

@@ -363,8 +363,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = build_parser()
     args = p.parse_args(argv)
     if args.methods is None:
-        args.methods = available_agents()
-        if len(args.methods) < len(METHODS):
+        args.methods = available_agents(args.scene)
+        if not any(METHODS[m][0] == "PPO" for m in args.methods):
             print("PPO rows skipped: pip install 'riskcrossing[rl]' to score the shipped PPO policies")
     else:
         args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]

@@ -2,6 +2,8 @@
 
     python -m benchmarks.train_ppo --lagrangian --seeds 5 --out agents/models --name ppo_lagrangian
     python -m benchmarks.train_ppo --out agents/models --name ppo_penalty      # the shipped policies
+    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \
+        --checkpoint-every 0 --out agents/models --name ppo_lagrangian_two_crossing   # two objects
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
 The copies are split over the uncertainty levels and draw epsilon per episode; the policy is
@@ -31,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
+from risk_env.scenes import SCENE_NAMES, scene_objects
 
 
 @dataclass
@@ -68,6 +71,9 @@ class Args:
     """Severity of the risk in the cost (the paper's, in J, as Table II's epsilon)."""
     object_motion: str = "sampled"
     """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
+    scene: str = "paper"
+    """Which road users cross (risk_env.scenes): the policy sees every one of the scene's object
+    slots (agents.ppo.FeatureSpec ``slots``; one slot: the paper's features)."""
     randomize: bool = False
     """Train on seeded variations of the scenario (curvature, starts, object speed); off: the
     paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
@@ -142,6 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     choices = {
         "severity": ("paper", "plastic", "probability"),
         "object_motion": ("paper", "sampled"),
+        "scene": SCENE_NAMES,
     }
     for f in dataclasses.fields(Args):
         flag = "--" + f.name.replace("_", "-")
@@ -186,10 +193,15 @@ def tolerances(args: Args) -> list[float]:
 
 
 def feature_spec(args: Args, dt: float) -> Any:
-    """The :class:`agents.ppo.FeatureSpec` of the run (None: unconditioned, 14 features)."""
+    """The :class:`agents.ppo.FeatureSpec` of the run (None: unconditioned, 14 features), with
+    one slot per object of ``--scene``."""
     from agents.ppo import FeatureSpec
 
-    return FeatureSpec(prediction=args.prediction, dt=dt) if args.conditioned else None
+    if not args.conditioned:
+        if args.scene != "paper":
+            raise ValueError("--no-conditioned sees one object only: train it on --scene paper")
+        return None
+    return FeatureSpec(prediction=args.prediction, dt=dt, slots=len(scene_objects(args.scene)))
 
 
 def planned_timesteps(args: Args) -> int:
@@ -217,6 +229,7 @@ def make_env(args: Args) -> Any:
         severity=args.severity,
         object_motion=args.object_motion,
         randomize=args.randomize,
+        scene=args.scene,
     )
     weights = RewardWeights(
         args.w_path_error, args.w_progress, args.w_goal, args.cost_scale, args.collision_cost

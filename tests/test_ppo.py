@@ -21,6 +21,7 @@ from agents.ppo_env import TERMS, LevelMix, PolicyView, RewardWeights, SB3VecEnv
 from benchmarks.ppo_eval import best_seed, seed_table  # noqa: E402
 from benchmarks.rollout import rollout  # noqa: E402
 from risk_env import Scenario, observation  # noqa: E402
+from risk_env.parts import Uncertainty  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "agents" / "models"
@@ -279,3 +280,60 @@ def test_seeds_train_score_and_ship_the_best(tmp_path: Path) -> None:
     assert (out / "model.zip").read_bytes() == best.read_bytes()
     table = (out / "model_seeds.md").read_text()
     assert "mean ± std over 2" in table and f"| {summary['best']} (shipped) |" in table
+
+
+def _two_crossing_observations() -> np.ndarray:
+    """Observations ``(N, 22)`` of a two_crossing episode (sampled motion, random inputs)."""
+    env = gym.make(risk_env.ENV_ID, scene="two_crossing", object_motion="sampled")
+    obs, _ = env.reset(seed=1)
+    rows, rng = [obs], np.random.default_rng(0)
+    for _ in range(30):
+        obs, _, terminated, truncated, _ = env.step(rng.uniform([0.0, -0.8], [8.0, 0.8]))
+        rows.append(obs)
+        if terminated or truncated:
+            break
+    return np.array(rows)
+
+
+def test_two_slot_features_see_every_object_and_zero_an_absent_slot() -> None:
+    """K = 2: 7 ego + 8 per slot + 3 context + 12 prediction per slot = 50 features; slot i's
+    object features are those :func:`features` gives for that object alone; an absent slot is all
+    zeros, its flag included, and leaves the other slot's features as they were."""
+    obs = _two_crossing_observations()
+    spec = FeatureSpec(prediction=True, slots=2)
+    ctx = Context(1000.0, Uncertainty.preset("medium")).array()
+    seen = spec(obs, ctx)
+    assert spec.size == 50 and seen.shape == (len(obs), 50) and np.isfinite(seen).all()
+    for i in range(2):  # slot i alone, in a one-slot observation, through the one-object features
+        alone = np.concatenate([obs[:, :10], obs[:, observation.slot(i)]], axis=1)
+        np.testing.assert_array_equal(seen[:, 7 + 8 * i], 1.0)
+        np.testing.assert_allclose(seen[:, 8 + 8 * i : 15 + 8 * i], features(alone)[:, 6:13], atol=1e-6)
+        one = FeatureSpec(prediction=True)(alone, ctx)[:, FEATURES + 3 :]
+        np.testing.assert_allclose(seen[:, 26 + 12 * i : 38 + 12 * i], one, atol=1e-6)
+    blank = obs.copy()
+    blank[:, observation.slot(1)] = 0.0
+    gone = spec(blank, ctx)
+    assert not gone[:, 15:23].any() and not gone[:, 38:].any()
+    np.testing.assert_array_equal(gone[:, :15], seen[:, :15])
+    np.testing.assert_array_equal(gone[:, 23:38], seen[:, 23:38])
+    with pytest.raises(ValueError, match="2 object slots"):
+        spec(obs[:, : observation.SIZE], ctx)
+
+
+def test_shipped_two_crossing_policy_drives_its_scene_only() -> None:
+    """The two-object Lagrangian policy loads for two_crossing, acts finitely within the limits,
+    and is listed for that scene only."""
+    from benchmarks.rollout import AGENTS, available_agents, build_agent
+
+    env = gym.make(risk_env.ENV_ID, scene="two_crossing", risk_tolerance=500.0)
+    agent = build_agent(*AGENTS["ppo:lagrangian_two_crossing"], env)
+    assert agent.spec is not None and agent.spec.slots == 2
+    assert agent.metadata["args"]["scene"] == "two_crossing"
+    obs = _two_crossing_observations()
+    inputs, _ = agent.predict(obs)
+    assert inputs.shape == (len(obs), 2) and np.isfinite(inputs).all()
+    assert (inputs[:, 0] >= 0.0).all() and (inputs[:, 0] <= agent.limits.v_max).all()
+    assert "ppo:lagrangian_two_crossing" in available_agents("two_crossing")
+    assert "ppo:lagrangian_two_crossing" not in available_agents("paper")
+    with pytest.raises(ValueError, match="2 object slots"):
+        agent.predict(obs[0, : observation.SIZE])
