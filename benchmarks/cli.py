@@ -39,6 +39,11 @@ def plain(text: str) -> str:
     return textwrap.fill(" ".join(text.split()), width=90, break_on_hyphens=False)
 
 
+def comma_list(text: str) -> list[str]:
+    """The items of a comma-separated option value, stripped, empty ones dropped."""
+    return [item.strip() for item in text.split(",") if item.strip()]
+
+
 def examples(doc: str) -> list[str]:
     """The example commands (lines starting ``python -m benchmarks.``) of a module docstring."""
     lines = [line.strip() for line in doc.splitlines()]

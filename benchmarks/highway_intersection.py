@@ -304,7 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = build_parser()
     args = parser.parse_args(argv)
-    args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
+    args.agents = cli.comma_list(args.agents)
     if args.episodes < 1 or args.slots < 1:
         parser.error("--episodes and --slots must be >= 1")
     for spec in args.agents:

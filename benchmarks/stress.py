@@ -305,7 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = build_parser()
     args = p.parse_args(argv)
-    args.agents = [a.strip() for a in args.agents.split(",") if a.strip()]
+    args.agents = cli.comma_list(args.agents)
     if bad := [a for a in args.agents if a not in AGENTS]:
         p.error(f"unknown agent(s) {bad}; expected from {list(AGENTS)}")
     if args.scenes < 1:

@@ -367,16 +367,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         if not any(METHODS[m][0] == "PPO" for m in args.methods):
             print("PPO rows skipped: pip install 'riskcrossing[rl]' to score the shipped PPO policies")
     else:
-        args.methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+        args.methods = cli.comma_list(args.methods)
     unknown = [m for m in args.methods if m not in METHODS]
     if unknown:
         p.error(f"unknown method(s) {unknown}; expected from {list(METHODS)}")
-    args.uncertainty = [u.strip() for u in args.uncertainty.split(",") if u.strip()]
+    args.uncertainty = cli.comma_list(args.uncertainty)
     bad = [u for u in args.uncertainty if u not in LEVELS]
     if bad:
         p.error(f"unknown uncertainty {bad}; expected from {list(LEVELS)}")
     try:
-        args.tolerances = [float(t) for t in args.tolerances.split(",") if t.strip()]
+        args.tolerances = [float(t) for t in cli.comma_list(args.tolerances)]
     except ValueError:
         p.error(f"--tolerances must be numbers, got {args.tolerances!r}")
     if any(t < 0 for t in args.tolerances):

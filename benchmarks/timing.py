@@ -175,14 +175,14 @@ def main(argv: list[str] | None = None) -> None:
     parser = build_parser()
     args = parser.parse_args(argv)
 
-    names = [a.strip() for a in args.agents.split(",") if a.strip()]
+    names = cli.comma_list(args.agents)
     unknown = [a for a in names if a not in AGENTS]
     if unknown:
         parser.error(f"unknown agent(s) {unknown}; choose from {list(AGENTS)}")
-    levels = [u.strip() for u in args.uncertainty.split(",") if u.strip()]
+    levels = cli.comma_list(args.uncertainty)
     if any(u not in UNCERTAINTY_PRESETS for u in levels):
         parser.error(f"uncertainty must be among {UNCERTAINTY_PRESETS}, got {levels}")
-    tolerances = [float(e) for e in args.tolerances.split(",") if e.strip()]
+    tolerances = [float(t) for t in cli.comma_list(args.tolerances)]
     if args.steps < 1:
         parser.error(f"--steps must be >= 1, got {args.steps}")
 

@@ -184,12 +184,12 @@ def parse_args(argv: list[str] | None = None) -> Args:
 
 def levels(args: Args) -> list[str]:
     """The uncertainty presets of ``--uncertainty``."""
-    return [u.strip() for u in args.uncertainty.split(",") if u.strip()]
+    return cli.comma_list(args.uncertainty)
 
 
 def tolerances(args: Args) -> list[float]:
     """The epsilons of ``--tolerances``."""
-    return [float(t) for t in args.tolerances.split(",") if t.strip()]
+    return [float(t) for t in cli.comma_list(args.tolerances)]
 
 
 def feature_spec(args: Args, dt: float) -> Any:
