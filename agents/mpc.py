@@ -43,6 +43,7 @@ from agents.solver import (
 )
 from agents.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step
 from risk_env import observation as ob
+from risk_env.frame import to_frame
 from risk_env.ops import NUMPY
 from risk_env.path import point
 from risk_env.prediction import Belief
@@ -410,7 +411,8 @@ class PathFollowingMPC:
     def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:
         """Whether some step's risk of slot ``slot``'s object could be nonzero where the ego can
         reach (else the slot is inactive; no active slot: ``"free"``)."""
-        distance = signed_box_distance(x0[0] - future.x, x0[1] - future.y, future.half_x, future.half_y)
+        along, across = to_frame(x0[0] - future.x, x0[1] - future.y, future.frame)
+        distance = signed_box_distance(along, across, future.half_x, future.half_y)
         spare = distance - self._reach(x0[4]) - float(self._numbers[slot, 0])
         return bool(np.any(spare <= FREE_MARGIN))
 
