@@ -15,7 +15,8 @@ evaluate the same integral on the same nodes (:mod:`risk_env.quadrature`) and ag
 Both take ego-minus-mean offsets ``(dx, dy)`` [m], the radius r = r_e + r_o [m], the standard
 deviations ``(sx, sy)`` [m] and the box half widths ``(hx, hy)`` [m], floored to
 :data:`~risk_env.quadrature.GEOMETRY_FLOOR` by the caller, and assume that the disc meets the box
-(off it the probability is exactly 0 and callers return that without integrating).
+(off it, cut to +-SUPPORT sigma, the probability is exactly 0 and callers return that without
+integrating: :func:`risk_env.disc.support_halves`).
 """
 
 from __future__ import annotations
@@ -96,9 +97,9 @@ def disc_probability_scalar(
         dx, dy, sx, sy, hx, hy = dy, dx, sy, sx, hy, hx
     lim = SUPPORT * sx
     # Segment edges in the disc angle t: the outer range's ends (cut to where the chord meets the
-    # inner box) and breaks, then the chord's ends crossing the inner box edges (r cos t =
-    # |hy -+ dy|), clipped to the range and sorted.
-    meet = math.acos(_clip((abs(dy) - hy) / r, 0.0, EDGE))
+    # inner box, within SUPPORT sigma) and breaks, then the chord's ends crossing the inner box
+    # edges (r cos t = |hy -+ dy|), clipped to the range and sorted.
+    meet = math.acos(_clip((abs(dy) - min(hy, SUPPORT * sy)) / r, 0.0, EDGE))
     ends = [math.asin(_clip((_clip(at, -lim, lim) - dx) / r, -EDGE, EDGE)) for at in (-hx, hx)]
     t_lo = max(ends[0], -meet)
     t_hi = max(min(ends[1], meet), t_lo)
@@ -181,7 +182,7 @@ def disc_probability_batch(
     edges = np.empty((SEGMENTS + 1, n))
     np.arcsin(at[0], out=edges[0])
     np.arcsin(at[1], out=edges[-1])
-    meet = np.arccos(np.clip((dy - hy) / r, 0.0, EDGE))
+    meet = np.arccos(np.clip((dy - np.minimum(hy, SUPPORT * sy)) / r, 0.0, EDGE))
     np.maximum(edges[0], -meet, out=edges[0])
     np.minimum(edges[-1], meet, out=edges[-1])
     np.maximum(edges[-1], edges[0], out=edges[-1])

@@ -27,7 +27,11 @@ angles where the chord's ends cross the inner box edges."""
 EDGE = 1.0 - 1e-12
 """Arguments of asin / acos are clipped to this, keeping their derivatives finite."""
 SUPPORT = 7.0
-"""The outer quadrature covers at most +-SUPPORT standard deviations (mass beyond: < 3e-12)."""
+"""The rule covers at most +-SUPPORT standard deviations of either axis (the mass beyond: < 3e-12
+per axis): the outer quadrature's range, and the inner axis' reach, to which the outer range is cut
+(where the chord comes no nearer to the inner mean, P gets nothing: otherwise P there would be
+the rounding of two near-equal terms of the complementary form, ~1e-8). P is exactly 0 where the
+disc misses the box cut to +-SUPPORT sigma (:func:`~risk_env.disc.support_halves`)."""
 GEOMETRY_FLOOR = 1e-6
 """Standard deviations and box half widths [m] below this are raised to it: a point mass is
 represented to within 1e-6 m."""
@@ -36,7 +40,8 @@ SOLVER_SIGMA_BREAKS = (-2.5, -1.0, 1.0, 2.5)
 """The MPC's rule (:meth:`risk_env.risk.ExactRisk.casadi_margin`): the env's breaks but +-5 sigma,
 where its outer integral ends (:data:`SOLVER_SUPPORT`)."""
 SOLVER_SUPPORT = 5.0
-"""The MPC's rule covers at most +-5 standard deviations of the outer axis: two of the env's eleven
+"""The MPC's rule covers at most +-5 standard deviations of the outer axis (the inner axis' reach
+stays :data:`SUPPORT`): two of the env's eleven
 segments fewer (54 nodes, not 66), the others the same."""
 SOLVER_SHORTFALL = math.erfc(SOLVER_SUPPORT / math.sqrt(2.0)) / math.erf(SOLVER_SUPPORT / math.sqrt(2.0))
 """Bound on how far the MPC's P falls below the env's (5.7e-7): the truncated outer mass beyond

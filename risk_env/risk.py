@@ -30,7 +30,7 @@ import casadi as ca
 import numpy as np
 
 from risk_env.disc import disc_probability as disc_probability
-from risk_env.disc import signed_box_distance
+from risk_env.disc import signed_box_distance, support_halves
 from risk_env.estimator import EgoFloats as EgoFloats
 from risk_env.estimator import RiskEstimator, ego_parts, floor_geometry, shape_of
 from risk_env.exact_kernel import disc_probability_batch, disc_probability_scalar
@@ -95,8 +95,9 @@ class ExactRisk(RiskEstimator):
         return (epsilon - self.solver_risk(ego, belief)) / self.severity.scale
 
     def risk(self, ego, belief, rng=None):
-        """As :meth:`RiskEstimator.risk`; states whose disc misses the truncation box get exactly
-        0 without quadrature (the same value the full formula gives), the rest are integrated by
+        """As :meth:`RiskEstimator.risk`; states whose disc misses the truncation box (cut to
+        +-7 sigma, :func:`~risk_env.disc.support_halves`) get exactly 0 without quadrature (the
+        same value the full formula gives), the rest are integrated by
         the numpy kernels of :mod:`risk_env.exact_kernel` (equal to the generic form to rounding)."""
         ego = np.asarray(ego, dtype=float)
         fields = vars(belief)
@@ -105,7 +106,7 @@ class ExactRisk(RiskEstimator):
         x, y, th, v = ego_parts(ego)
         dx, dy = to_frame(x - belief.x, y - belief.y, fields["frame"])
         sx, sy, hx, hy = (floor_geometry(fields[f]) for f in ("sigma_x", "sigma_y", "half_x", "half_y"))
-        near = signed_box_distance(dx, dy, hx, hy) < self.radius
+        near = signed_box_distance(dx, dy, *support_halves(sx, sy, hx, hy)) < self.radius
         shapes = {near.shape, *(shape_of(fields[f]) for f in _BELIEF_FIELDS)} - {()}
         shape = shapes.pop() if len(shapes) == 1 else np.broadcast_shapes(*shapes)
         if near.shape != shape:
@@ -157,10 +158,10 @@ class ExactRisk(RiskEstimator):
         dx, dy = to_frame(x - belief.x, y - belief.y, belief.frame, MATH)
         hx = max(belief.half_x, GEOMETRY_FLOOR)
         hy = max(belief.half_y, GEOMETRY_FLOOR)
-        if not signed_box_distance(dx, dy, hx, hy, MATH) < self.radius:
-            return 0.0
         sx = max(belief.sigma_x, GEOMETRY_FLOOR)
         sy = max(belief.sigma_y, GEOMETRY_FLOOR)
+        if not signed_box_distance(dx, dy, *support_halves(sx, sy, hx, hy, MATH), MATH) < self.radius:
+            return 0.0
         p = disc_probability_scalar(
             float(dx), float(dy), self.radius, float(sx), float(sy), float(hx), float(hy)
         )
