@@ -138,11 +138,10 @@ def disc_probability(
     zy = ops.erf(hy * ky)
     # Complementary form: the exact mass of the outer range times the full inner mass, minus what
     # the chord misses; exact wherever the chord spans the inner box. Twice the missed inner mass:
-    # above the chord 2 (Phi(hy) - Phi(top)), below it 2 (Phi(bottom) - Phi(-hy)), at most 2 zy
-    # (a chord that misses the box).
-    above = ops.maximum(ex(zy) - ops.erf(top * ex(ky)), 0.0)
-    below = ops.maximum(ex(zy) + ops.erf(bottom * ex(ky)), 0.0)
-    missed_twice = ops.minimum(above + below, 2.0 * ex(zy))
+    # above the chord 2 (Phi(hy) - Phi(top)), below it 2 (Phi(bottom) - Phi(-hy)), the ends
+    # clipped to the box (the range is cut to where the chord meets it, so at most 2 zy).
+    top, bottom = ops.minimum(top, ex(hy)), ops.maximum(bottom, -ex(hy))
+    missed_twice = 2.0 * ex(zy) - ops.erf(top * ex(ky)) + ops.erf(bottom * ex(ky))
     u = x * ex(1.0 / (_SQRT2 * sx))
     missed = ops.sum(w * half_chord * ops.exp(-u * u) * missed_twice) * (0.5 * _INV_SQRT_2PI) / sx
     s_lo, s_hi = ops.sin(ops.part(t_lo, 0)), ops.sin(ops.part(t_hi, 0))
