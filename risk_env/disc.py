@@ -57,7 +57,7 @@ def disc_probability(
     One axis (the inner) is integrated in closed form with Phi, the other (the outer) by
     Gauss-Legendre quadrature in the disc angle t (x = dx + r sin t, which removes the
     square-root ends of the chord). Three choices make the rule exact for any aspect ratio
-    (to 1e-5 against nested adaptive quadrature, ``python -m benchmarks.exact_accuracy``):
+    (within 4e-6 of nested adaptive quadrature, ``python -m benchmarks.exact_accuracy``):
 
     - the outer axis (:func:`outer_is_y`) is the one along which the inner chord's ends sweep
       slowest through the inner Gaussian: for a round belief the axis of least offset (near the
@@ -78,7 +78,8 @@ def disc_probability(
     motion of the outer range's two ends, where the integrand jumps to 0, enters through two
     extra nodes at the held ends whose weights are the ends' motion: 0 in value, Leibniz's term
     to second order in derivatives. Each node's term is then a product of a function of dx and
-    one of dy, cheap to differentiate: the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
+    one of dy, cheap to differentiate (figures of the earlier 4-node rule, the derivative scheme
+    unchanged): the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
     instructions than through the edges (asin, acos, the sorting network), its Jacobian 46 %
     fewer (with the same rule; the SMPC's shorter rule saves 14 % more). The gradient
     is the quadrature of P's gradient, which differs from the derivative of the rule's value by

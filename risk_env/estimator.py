@@ -20,6 +20,8 @@ EgoFloats = tuple[float, float, float, float]
 
 
 def ego_parts(ego: Any) -> tuple[Any, Any, Any, Any]:
+    """``(c1 [m], c2 [m], theta [rad], v [m/s])`` of ego states ``(..., 4)`` (numpy), a CasADi
+    vector of 4 or a sequence of 4 floats."""
     if isinstance(ego, np.ndarray):
         if ego.shape[-1:] != (4,):
             raise ValueError(f"ego state must have a last axis of 4 (c1, c2, theta, v), got {ego.shape}")
