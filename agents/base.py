@@ -89,7 +89,7 @@ class SolveReport:
     exceeds when other processes took the CPU."""
     overran_calls: int = 0
     """Solver calls that ran past their rung's iteration limit (fatrop may ignore ``max_iter``, see
-    :mod:`agents.budget`): the calls the time cap could not bound."""
+    :mod:`agents.mpc.nlp.budget`): the calls the time cap could not bound."""
     capped: bool = False
     """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
     rung's iteration or time limit) or left no time for one."""

@@ -172,7 +172,7 @@ def real_array(value: Any, name: str, expected: str) -> np.ndarray:
 
 def ego_action(action: Any, ego: Any) -> tuple[float, float]:
     """``action`` as ``(v, omega)`` floats if the env's action Box of ``ego`` (a
-    :class:`~risk_env.parts.Ego`) holds it (up to :func:`slack`); else ``ValueError`` naming it."""
+    :class:`~risk_env.scenario.parts.Ego`) holds it (up to :func:`slack`); else ``ValueError`` naming it."""
     a = real_array(action, "action", "2 numbers (v [m/s], omega [rad/s])")
     if a.shape != (2,):
         raise ValueError(

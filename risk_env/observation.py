@@ -28,10 +28,10 @@ positions, arc length and position errors, pi for the wrapped headings, :data:`R
 speeds, turn rates and the speed error, [0, 1] for the flags (:func:`bounds`). A Box derived from
 each scenario would change with it: saved policies (the PPO models) would no longer match, and
 randomised episodes and batched copies could not share one space. So the scenario guarantees the
-fit instead: :class:`~risk_env.scenario.Scenario` rejects, naming the fields, any scenario whose
+fit instead: :class:`~risk_env.scenario.scenario.Scenario` rejects, naming the fields, any scenario whose
 observations could leave the Box within ``max_steps`` steps, for any actions and with every
 object moving either way (``object_motion="paper"`` or ``"sampled"``); see
-:meth:`~risk_env.scenario.Scenario.observation_reach` for the worst cases. Stepping past an
+:meth:`~risk_env.scenario.scenario.Scenario.observation_reach` for the worst cases. Stepping past an
 episode's end raises, so no episode runs longer. (``randomize=True`` draws each episode's
 scenario through the same check: a draw that could leave the Box raises at ``reset``.)
 """
@@ -43,7 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from risk_env.ops import NUMPY
+from risk_env.models.ops import NUMPY
 
 EGO_POSE = slice(0, 3)
 EGO_INPUT = slice(3, 5)

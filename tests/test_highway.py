@@ -20,7 +20,6 @@ pytest.importorskip("highway_env")
 
 from agents import RMPC, SMPC  # noqa: E402
 from risk_env import ENV_ID, observation  # noqa: E402
-from risk_env.dynamics import unicycle_step  # noqa: E402
 from risk_env.highway import (  # noqa: E402
     IDMEgo,
     IntersectionAdapter,
@@ -31,9 +30,10 @@ from risk_env.highway import (  # noqa: E402
     vehicle_measurement,
 )
 from risk_env.highway import graphics as G  # noqa: E402
-from risk_env.ops import NUMPY  # noqa: E402
-from risk_env.path import point  # noqa: E402
-from risk_env.scenario import ReferencePath  # noqa: E402
+from risk_env.models.dynamics import unicycle_step  # noqa: E402
+from risk_env.models.ops import NUMPY  # noqa: E402
+from risk_env.models.path import point  # noqa: E402
+from risk_env.scenario.scenario import ReferencePath  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 KINEMATIC = {"action": {"type": "ContinuousAction", "dynamical": False}}

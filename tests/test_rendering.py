@@ -14,7 +14,7 @@ import pytest
 
 import risk_env
 from risk_env import ENV_ID
-from risk_env import rendering as R
+from risk_env.render import rendering as R
 
 ROOT = Path(__file__).resolve().parents[1]
 

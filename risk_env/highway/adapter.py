@@ -7,7 +7,7 @@
 highway-env env with an SB3-style policy drives it.
 
 **The reference path.** The MPC core follows one constant-curvature arc, a
-:class:`~risk_env.scenario.ReferencePath` (:mod:`agents.ocp` builds its problem from it). The
+:class:`~risk_env.scenario.scenario.ReferencePath` (:mod:`agents.mpc.nlp.ocp` builds its problem from it). The
 controlled vehicle's route is a chain of highway-env lanes, each straight (curvature 0) or circular
 (curvature 1/radius), so each lane *is* such an arc, exactly (:class:`RoutePath`). The adapter keeps
 one agent per lane of the route, built on the scenario re-posed on that lane (same numbers,
@@ -19,7 +19,7 @@ plan bends at the hand-over, one step late. The new agent starts cold (no warm s
 
 **The objects.** The agent has ``slots`` object slots (default :data:`DEFAULT_SLOTS`; the adapter
 builds its agents with ``object_slots=slots``) and one solve plans against every vehicle it is
-handed (:mod:`agents.objects`). The adapter hands it every observed vehicle, nearest first, up to
+handed (:mod:`agents.mpc.objects`). The adapter hands it every observed vehicle, nearest first, up to
 the slot count; the other slots are flagged absent (no stand-in object, no choice of a "first
 conflict"). Only when more vehicles are observed than there are slots are the farthest left out.
 Each measurement is observed position, heading and speed; its turn rate is the change of its
@@ -49,13 +49,13 @@ import gymnasium as gym
 import numpy as np
 
 from risk_env import observation as layout
-from risk_env.dynamics import unicycle_step
 from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
 from risk_env.highway.idm import IDMEgo, reached
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
-from risk_env.ops import NUMPY
-from risk_env.path import path_error_vector, project
-from risk_env.scenario import ReferencePath, Scenario
+from risk_env.models.dynamics import unicycle_step
+from risk_env.models.ops import NUMPY
+from risk_env.models.path import path_error_vector, project
+from risk_env.scenario.scenario import ReferencePath, Scenario
 
 INTERSECTION_CONFIG: dict[str, Any] = {
     "action": {
