@@ -39,7 +39,7 @@ scenario through the same check: a draw that could leave the Box raises at ``res
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -125,6 +125,13 @@ def bounds(slots: int = 1) -> tuple[np.ndarray, np.ndarray]:
         low[start + 3], high[start + 3] = -np.pi, np.pi  # the heading
         low[start + 4 : start + 6], high[start + 4 : start + 6] = -RATE_BOUND, RATE_BOUND
     return low, high
+
+
+def action_bounds(ego: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of the action Box, float32 ``(2,)`` each: ``(v_min, -omega_max)`` and
+    ``(v_max, omega_max)`` of ``ego`` (a :class:`~risk_env.scenario.parts.Ego`) [m/s, rad/s]."""
+    low = np.array([ego.v_min, -ego.omega_max], dtype=np.float32)
+    return low, np.array([ego.v_max, ego.omega_max], dtype=np.float32)
 
 
 class Observation(NamedTuple):

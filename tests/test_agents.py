@@ -251,7 +251,7 @@ def test_soft_problem_is_an_exact_penalty_where_the_hard_one_is_feasible(make, e
         assert report.fallback is None and agent.failures == 0
         if report.variant != "free":
             # the soft problem, started at the hard plan (slack costs 0), stays there
-            step = Step(agent, 1, obs, Budget(math.inf))
+            step = Step(agent._context(), agent._measure(1, obs), Budget(math.inf))
             hard, soft = agent._problem(step.variant), agent._problem(soft_variant(step.variant))
             plan = np.column_stack([report.inputs, report.path_speed])
             w0 = guesses.pack(soft, guesses.rollout(soft, step.x0, plan), plan)
@@ -434,7 +434,7 @@ def test_every_rung_keeps_its_iteration_limit_after_the_build(make) -> None:
     agent = make.from_env(env, max_solve_time=0.1)
     obs, _ = env.reset(seed=0)
     agent.predict(obs)
-    step = Step(agent, 0, obs, Budget(math.inf))
+    step = Step(agent._context(), agent._measure(0, obs), Budget(math.inf))
     for variant in (step.variant, soft_variant(step.variant)):
         pr = agent._problem(variant)
         args = step.args(pr)

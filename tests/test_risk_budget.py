@@ -102,7 +102,7 @@ def test_budget_and_weight_sum_over_every_object_slot() -> None:
     """Two objects: one p layout ([epsilon, v_ref, 2 slot blocks, TERMS]); the budget's and the
     weight's per-stage R is the sum over the active slots, so the agent's spent risk is the env's
     summed episode risk, and the budget holds without a fallback."""
-    from agents.mpc.nlp.ocp import SLOT_SIZE, TERMS
+    from agents.mpc.nlp.parameters import SLOT_SIZE, TERMS
 
     budget = 0.3
     env = gym.make(

@@ -1,21 +1,7 @@
-"""The path-following MPC controller: one step = measure, choose the NLP variant, warm-start,
-solve, degrade gracefully; SB3's ``predict`` on top.
-
-The optimal control problem is in :mod:`agents.mpc.nlp.ocp`, its solver (options, compilation, caches) in
-:mod:`agents.mpc.nlp.solver`, the initial guesses in :mod:`agents.mpc.guesses`, the time budget in
-:mod:`agents.mpc.nlp.budget`, the solve attempts in :mod:`agents.mpc.attempts`, the last resort in
-:mod:`agents.mpc.fallback`. The controller adds:
-
-- **Variant choice**: ``"free"`` (no risk rows) when no step's risk can be nonzero anywhere the ego
-  can reach within the horizon (distance to the truncation box minus the distance reachable under
-  the bounds and rate limits exceeds r_e + r_o + :data:`FREE_MARGIN`), else the agent's risk form.
-- **Initial guess**: the previous solution shifted by one stage (inputs shifted, the last repeated,
-  states re-simulated from the measurement) with its shifted multipliers. The first solve of an
-  episode solves from each of a few rollouts (brake, track the path, reverse) and keeps the plan of
-  least cost; a subclass may instead hand it the plan of a cheaper pilot problem
-  (:meth:`PathFollowingMPC._pilot_plan`, the Monte Carlo SMPC's 100-draw pilot), which did that.
-- **Graceful degradation** in a fixed order, within a wall-time cap (see :class:`PathFollowingMPC`).
-"""
+"""The path-following MPC controller (:class:`PathFollowingMPC`): SB3's ``predict`` over a step
+that measures (:mod:`agents.mpc.measure`), chooses the NLP variant (``"free"``: no risk rows, when
+no object can matter within the horizon) and runs the step pipeline (:mod:`agents.mpc.step`: warm
+start, solve, degrade gracefully within a wall-time cap) on the NLP of :mod:`agents.mpc.nlp`."""
 
 from __future__ import annotations
 
@@ -28,9 +14,12 @@ from typing import Any, ClassVar
 import casadi as ca
 import numpy as np
 
-from agents.base import SolveReport, as_batch
+from agents.base import SolveReport, predict_each
+from agents.mpc import measure
+from agents.mpc.measure import FREE_MARGIN
 from agents.mpc.nlp.budget import Budget
-from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, slot_numbers, soft_variant
+from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, soft_variant
+from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
 from agents.mpc.nlp.solver import (
     DEFAULT_JIT_CACHE,
     SOLVERS,
@@ -41,18 +30,14 @@ from agents.mpc.nlp.solver import (
     call_solver,
 )
 from agents.mpc.objects import check_slots, combine, slot_scenario
-from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step
+from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step, StepContext, StepInput
 from risk_env import observation as ob
-from risk_env.models.ops import NUMPY
-from risk_env.models.path import point
 from risk_env.prediction.belief import Belief
-from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk, signed_box_distance
+from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk
 from risk_env.scenario.scenario import Scenario
 
 __all__ = ["FEASIBLE_SLACK", "FREE_MARGIN", "SOFT_SHARE", "SOLVERS", "STAGE_COSTS", "PathFollowingMPC"]
 
-FREE_MARGIN = 0.5
-"""Extra distance [m] the reachable set must keep from every box for the ``"free"`` variant."""
 RT_SHARE = 0.2
 """The default wall-time cap of a step, as a share of the sample time T."""
 RUNGS = 6
@@ -67,39 +52,11 @@ class PathFollowingMPC:
     :class:`agents.SMPC`). The problem is in :mod:`agents.mpc.nlp.ocp`, its solver in
     :mod:`agents.mpc.nlp.solver`.
 
-    Graceful degradation, in this order, each step (never raising inside an episode, never
-    returning NaN; :attr:`last_solve` says which level acted, :attr:`failures` counts the steps
-    where (b) or (c) did):
-
-    (a) the hard problem: warm-started from the shifted previous plan (an episode's first step:
-        from each of the best initial-guess rollouts, up to ``cold_starts``, keeping the plan of
-        least cost). A success is IPOPT's "Solve_Succeeded" or "Solved_To_Acceptable_Level",
-        fatrop's success flag, with finite numbers.
-    (b) if none converges (infeasible, iteration or time limit, NaN, an exception): the same
-        problem with its risk rows softened by L1-penalised slacks (the ``"*_soft"`` variants of
-        :mod:`agents.mpc.nlp.ocp`), from the shifted plan, then the best rollouts and manoeuvres (up to
-        ``cold_starts``; they replace the hard problem's cold retries). The penalty is
-        exact: where the hard problem is feasible (and rho exceeds its risk rows' multipliers) the
-        soft problem's solution is the hard one's, with zero slacks. So a soft plan whose slacks
-        vanish (to :data:`FEASIBLE_SLACK`) solves the hard problem, and is level (a)
-        (``fallback=None``, ``retried=True``, ``variant="*_soft"``). Otherwise the soft plan, the
-        least violation of the risk bound the solver found (so the most clearance it could keep),
-        is applied: ``fallback="soft"`` with the ``violation``.
-        After a step whose soft plan missed the risk bound the next step goes to the soft problem
-        directly, from the shifted plan only ("elastic mode", as in SNOPT): the hard problem is
-        most likely infeasible still, and where it is not, its exact penalty returns its solution.
-    (c) if that fails too: the safest of a family of rate-limited manoeuvres (brake, hold,
-        accelerate, reverse, each straight or turning fully left or right; :mod:`agents.mpc.fallback`),
-        judged by the agent's own risk and the worst-case clearance over the horizon:
-        ``fallback="manoeuvre"``.
-
-    **Real-time bound**: a step takes at most ``max_solve_time`` of wall time (by default 20 % of the
-    sample time), enforced through the solver's own limits: each NLP is built at a few rungs of
-    iteration limits (fatrop: ``max_iter / 2**r``) or wall-time limits (IPOPT: ``max_wall_time =
-    max_solve_time / 2**r``), and each call runs at the largest rung that fits the time left,
-    judged from the measured time per iteration (:mod:`agents.mpc.nlp.budget`). The hard problem's calls
-    leave :data:`SOFT_SHARE` of the cap to the soft problem, which leaves the manoeuvres their
-    (small, measured) time. When no rung fits, the next level acts.
+    Each step degrades gracefully in a fixed order, (a) the hard problem, (b) the same problem with
+    softened risk rows, (c) the safest rate-limited manoeuvre, within a wall-time cap of
+    ``max_solve_time`` (:mod:`agents.mpc.step`); it never raises inside an episode and never
+    returns NaN. :attr:`last_solve` says which level acted, :attr:`failures` counts the steps
+    where (b) or (c) did.
 
     Args:
         scenario: the case study; its ``risk_tolerance`` is epsilon unless overridden.
@@ -216,9 +173,6 @@ class PathFollowingMPC:
         self._problems: dict[str, Problem] = {}
         self._maps: dict[tuple[str, str, str], np.ndarray] = {}
         self._manoeuvre_time = MANOEUVRE_TIME
-        ego, dt = scenario.ego, scenario.dt
-        self._speed_cap = max(abs(ego.v_min), abs(ego.v_max))
-        self._dv = ego.accel_max * dt
         variant = self._risk_variant()
         built = [self._problem(v) for v in ("free", variant, soft_variant(variant))]
         self.build_time = sum(p.build_time for p in built)
@@ -259,8 +213,7 @@ class PathFollowingMPC:
         return cls(scenario, **kwargs)
 
     def reset(self, seed: int | None = None) -> None:
-        """Forget warm starts and plans, zero :attr:`failures`, re-seed the generator (with ``seed``
-        or the constructor's)."""
+        """Forget warm starts and plans, zero :attr:`failures`, re-seed the generator (``seed``)."""
         self._memory.clear()
         self.failures = 0
         self.last_solve = None
@@ -283,26 +236,12 @@ class PathFollowingMPC:
         so does a new episode detected from the observation (its last applied input is not the
         action returned, or the ego is over 1 m from where the plan put it).
         """
-        obs, single = as_batch(observation, ob.size(self.slots))
-        starts = np.zeros(len(obs), dtype=bool)
-        if episode_start is not None:
-            flags = np.asarray(episode_start, dtype=bool).reshape(-1)
-            if flags.size not in (1, len(obs)):
-                raise ValueError(
-                    f"episode_start must have 1 or {len(obs)} entries (one per observation), got {flags.size}"
-                )
-            starts |= np.broadcast_to(flags, (len(obs),))
-        actions = np.empty((len(obs), 2), dtype=np.float32)
-        reports = []
-        for i, o in enumerate(obs):
-            if starts[i]:
-                self._memory.pop(i, None)
-            report = self._step(i, o)
-            actions[i] = report.action
-            reports.append(report)
+        size = ob.size(self.slots)
+        forget = lambda i: self._memory.pop(i, None)  # noqa: E731  (a new episode of batch entry i)
+        actions, reports = predict_each(observation, size, episode_start, forget, self._step)
         self.last_solves = reports
         self.last_solve = reports[-1]
-        return (actions[0] if single else actions), None
+        return actions, None
 
     # ------------------------------------------------------------------ subclass hooks
     def _estimator_key(self) -> tuple[Any, ...]:
@@ -362,7 +301,8 @@ class PathFollowingMPC:
         raise NotImplementedError
 
     def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
-        """The risk terms' solver parameters (:data:`agents.mpc.nlp.ocp.TERMS`) of batch entry ``index``
+        """The risk terms' solver parameters (:data:`agents.mpc.nlp.parameters.TERMS`) of batch entry
+        ``index``
         (empty without terms); ``new_episode``: its memory was dropped."""
         return np.zeros(0)
 
@@ -395,25 +335,9 @@ class PathFollowingMPC:
             self._problems[variant] = cached_problem(key, build)
         return self._problems[variant]
 
-    # ------------------------------------------------------------------ one step
-    def _measured_state(self, o: ob.Observation) -> np.ndarray:
-        """x_0: the pose with theta unwrapped near theta_P(lambda_k), lambda_k, the last input."""
-        lam = o.progress
-        theta_p = float(point(self.scenario.path, lam)[2])
-        theta = theta_p + float(NUMPY.wrap_angle(o.ego_pose[2] - theta_p))
-        return np.array([o.ego_pose[0], o.ego_pose[1], theta, lam, o.ego_input[0], o.ego_input[1]])
-
-    def _reach(self, v_last: float) -> np.ndarray:
-        """Upper bound [m] on the distance from the current position to the state n = 1..N."""
-        speeds = np.minimum(self._speed_cap, abs(v_last) + self._dv * np.arange(1, self.horizon + 1))
-        return np.cumsum(speeds) * self.scenario.dt
-
     def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:
-        """Whether some step's risk of slot ``slot``'s object could be nonzero where the ego can
-        reach (else the slot is inactive; no active slot: ``"free"``)."""
-        distance = signed_box_distance(x0[0] - future.x, x0[1] - future.y, future.half_x, future.half_y)
-        spare = distance - self._reach(x0[4]) - float(self._numbers[slot, 0])
-        return bool(np.any(spare <= FREE_MARGIN))
+        """:func:`agents.mpc.measure.risk_possible` for slot ``slot``'s object."""
+        return measure.risk_possible(self.scenario, x0, future, float(self._numbers[slot, 0]))
 
     def _call(
         self, pr: Problem, args: dict[str, Any], rung: int = 0
@@ -422,19 +346,57 @@ class PathFollowingMPC:
         return call_solver(pr, args, self.settings.solver, rung)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
-        """One step for the observation ``obs_vec`` (10 + 6 K,) of batch entry ``index``
-        (:class:`agents.mpc.step.Step`), within the wall-time cap."""
+        """One step for the observation ``obs_vec`` (10 + 6 K,) of batch entry ``index``: measure
+        (:meth:`_measure`), run the step pipeline (:class:`agents.mpc.step.Step`) within the
+        wall-time cap, keep what it says to keep."""
         collecting = gc.isenabled()
         gc.disable()  # no garbage-collection pause inside the step: it runs between steps
         try:
             with Budget.open(self.max_solve_time) as budget:
-                return Step(self, index, obs_vec, budget).run()
+                data = self._measure(index, obs_vec)
+                result = Step(self._context(), data, budget).run()
         finally:
             if collecting:
                 gc.enable()
+        self._memory[index] = result.memory
+        self._manoeuvre_time = result.manoeuvre_time
+        self.failures += int(result.failed)
+        return result.report
 
-    def _new_episode(self, mem: dict[str, Any], o: ob.Observation) -> bool:
-        """The observation does not continue the episode this memory belongs to."""
-        if "action" not in mem or np.max(np.abs(o.ego_input - mem["action"])) > 1e-3:
-            return True
-        return bool(np.hypot(*(o.ego_pose[:2] - mem["predicted"])) > 1.0)
+    def _context(self) -> StepContext:
+        """What a step uses that the controller owns."""
+        return StepContext(
+            scenario=self.scenario,
+            settings=self.settings,
+            problem=self._problem,
+            built=self._problems,
+            call=self._call,
+            risk=self._risk_numpy,
+            worsts=self._worsts,
+            pilot=self._pilot_plan,
+            maps=self._maps,
+            epsilon=self._epsilon,
+            backoff=self.backoff,
+            cold_starts=self.cold_starts,
+            max_solve_time=self.max_solve_time,
+            manoeuvre_time=self._manoeuvre_time,
+        )
+
+    def _measure(self, index: int, obs_vec: np.ndarray) -> StepInput:
+        """The step's data from the observation: the memory (dropped for a new episode), x_0, each
+        present slot's beliefs at n = 1..N, the active slots, the NLP variant, the risk data and
+        the solver parameters."""
+        o = ob.split(obs_vec, slots=self.slots)
+        memory = self._memory.get(index)
+        if memory is not None and measure.new_episode(memory, o):
+            memory = None
+        x0 = measure.measured_state(self.scenario, o)
+        numbers = self._numbers
+        futures = measure.slot_beliefs(self._problem("free"), o, numbers)
+        # a slot is active when its object is present and may reach the ego within the horizon
+        active = np.array([f is not None and self._risk_possible(x0, f, k) for k, f in enumerate(futures)])
+        variant = self._risk_variant() if active.any() else "free"
+        data = self._risk_data(futures)
+        terms = self._terms_parameters(index, memory is None)
+        p = parameter_vector(self._epsilon, self.scenario.ego.v_ref, o.objects, active, numbers, data, terms)
+        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p)

@@ -3,7 +3,8 @@ and the numbers a step hands the solver.
 
 An agent has K object slots, fixed at construction (``object_slots``; by default the scenario's
 number of objects). Slot k takes object k's radius, mass and uncertainty; slots beyond the
-scenario's objects take the last object's (:func:`agents.mpc.nlp.ocp.slot_numbers`). In the solver these
+scenario's objects take the last object's (:func:`agents.mpc.nlp.parameters.slot_numbers`). In the
+solver these
 numbers are parameters, so one built solver serves every scene with up to K objects.
 
 - :func:`symbolic` makes an estimator whose collision distance and object mass are CasADi

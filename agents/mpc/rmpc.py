@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 
 from agents.mpc.controller import PathFollowingMPC
-from agents.mpc.nlp.ocp import INACTIVE
+from agents.mpc.nlp.parameters import INACTIVE
 from agents.mpc.objects import symbolic
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk
@@ -22,7 +22,7 @@ class RMPC(PathFollowingMPC):
     :class:`risk_env.risk.estimators.WorstCaseRisk`: ``max(clearance, (epsilon - s_worst)/scale) >= 0`` with
     clearance = signed distance from the ego centre to the object's truncation box minus
     ``r_e + r_o``, one row per object slot and stage (every object's worst case excluded; an
-    inactive slot's row is lifted by :data:`agents.mpc.nlp.ocp.INACTIVE`); a
+    inactive slot's row is lifted by :data:`agents.mpc.nlp.parameters.INACTIVE`); a
     tolerance above the worst severity over the speed interval relaxes it (with the
     paper's severity and a speed interval containing 0 that takes epsilon >= 6250 J, so the paper's
     RMPC ignores epsilon). ``risk="grid"`` is the paper's L-point grid under-approximation

@@ -11,7 +11,7 @@ import numpy as np
 from agents.base import SolveReport
 from agents.mpc.controller import PathFollowingMPC
 from agents.mpc.nlp import risk_budget as rb
-from agents.mpc.nlp.ocp import INACTIVE
+from agents.mpc.nlp.parameters import INACTIVE
 from agents.mpc.objects import slot_rows, symbolic
 from risk_env.models.ops import CASADI
 from risk_env.prediction.belief import Belief
@@ -70,7 +70,8 @@ class SMPC(PathFollowingMPC):
     **Many objects** (K slots, :mod:`agents.mpc.objects`): one row per stage on the sum of the active
     slots' risks, ``sum_k R_k <= epsilon`` (the expected total harm of the step), written
     ``max(min_k clearance_k, (epsilon - sum_k R_k)/scale) >= backoff`` (each inactive slot's
-    clearance lifted by :data:`agents.mpc.nlp.ocp.INACTIVE`, its R times 0); at epsilon = 0 one clearance
+    clearance lifted by :data:`agents.mpc.nlp.parameters.INACTIVE`, its R times 0); at epsilon = 0 one
+    clearance
     row per slot. With one slot these are the single-object rows exactly.
 
     **Episode risk budget and risk weight** (:mod:`agents.mpc.nlp.risk_budget`, where the guarantee and its

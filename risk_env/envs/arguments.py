@@ -4,10 +4,12 @@ scene and overrides, or a whole :class:`~risk_env.scenario.scenario.Scenario`; a
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Sequence
 from typing import Any
 
 from risk_env import checks
+from risk_env.envs.variations import Variations
 from risk_env.scenario.scenario import OVERRIDES, Scenario
 
 
@@ -73,3 +75,28 @@ def slot_count(value: Any, scenario: Scenario) -> int:
             f" pass object_slots >= {count} (nothing is dropped silently)"
         )
     return slots
+
+
+def check_variations(variations: Any, randomize: bool) -> Variations:
+    """The env's ``variations``: a :class:`~risk_env.envs.variations.Variations`, given only with
+    ``randomize=True``; None: the defaults."""
+    if variations is not None and not isinstance(variations, Variations):
+        raise TypeError(f"variations must be a risk_env.Variations, got {type(variations).__name__}")
+    if variations is not None and not randomize:
+        raise ValueError("variations= is used only with randomize=True")
+    return Variations() if variations is None else variations
+
+
+def check_weight(value: Any) -> float:
+    """The env's ``reward_risk_weight``: a finite number >= 0."""
+    weight = checks.real("reward_risk_weight", value)
+    if not (math.isfinite(weight) and weight >= 0.0):
+        raise ValueError(f"reward_risk_weight must be finite and >= 0, got {value!r}")
+    return weight
+
+
+def check_render_mode(value: Any, modes: Sequence[str]) -> str | None:
+    """The env's ``render_mode``: None or one of ``modes``."""
+    if value is not None and value not in modes:
+        raise ValueError(f"unknown render_mode {value!r}; expected None or one of {list(modes)}")
+    return value

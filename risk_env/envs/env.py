@@ -1,18 +1,9 @@
-"""``RiskCrossing-v0``: follow a reference path while road users cross it; every step reports
-the collision risk of the paper (Tolksdorf et al., IEEE IV 2023) in ``info`` and as a cost.
-
-The env only sequences what the rest of :mod:`risk_env` defines: the unicycle
-(:mod:`risk_env.models.dynamics`), the path (:mod:`risk_env.models.path`), the objects' prediction
-(:mod:`risk_env.prediction.belief`) and the risk estimators (:mod:`risk_env.risk.estimators`, summed
-over objects
-by :mod:`risk_env.risk.total_risk`). Drawing lives in :mod:`risk_env.render.rendering`, imported only when a
-render mode is set.
-"""
+"""``RiskCrossing-v0`` (:class:`RiskCrossingEnv`): the sequence of a step over what the rest of
+:mod:`risk_env` defines (models, prediction, risk); drawing in :mod:`risk_env.render`."""
 
 from __future__ import annotations
 
 import inspect
-import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -20,13 +11,11 @@ import numpy as np
 from gymnasium import spaces
 
 from risk_env import checks, observation
-from risk_env.checks import ACTION_TOLERANCE  # noqa: F401  (public here too)
-from risk_env.envs.arguments import build_scenario, slot_count
-from risk_env.envs.transition import advance_one, observe, reward_terms
+from risk_env.envs import arguments
+from risk_env.envs.transition import advance_one, view
 from risk_env.envs.variations import Variations, vary
-from risk_env.models.ops import MATH
-from risk_env.models.path import project
-from risk_env.render.renderers import RENDERERS, make_renderer
+from risk_env.render.renderers import RENDERERS
+from risk_env.render.view import EnvView
 from risk_env.risk.estimators import RiskEstimator
 from risk_env.risk.total_risk import make_estimators, total
 from risk_env.scenario.scenario import Scenario
@@ -230,60 +219,36 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         object_slots: int | None = None,
         **overrides: Any,
     ) -> None:
-        base = build_scenario(uncertainty, risk_tolerance, scenario, scene, overrides, _ENV_ARGUMENTS)
+        base = arguments.build_scenario(
+            uncertainty, risk_tolerance, scenario, scene, overrides, _ENV_ARGUMENTS
+        )
         self.base_scenario: Scenario = base
         """The scenario given at construction (the episodes' own with ``randomize=False``)."""
         self.scenario: Scenario = base
         """The current episode's scenario; its ``risk_tolerance`` is the env's epsilon."""
-        self.object_slots: int = slot_count(object_slots, base)
+        self.object_slots: int = arguments.slot_count(object_slots, base)
         """K: the observation's object slots."""
-        if variations is not None and not isinstance(variations, Variations):
-            raise TypeError(f"variations must be a risk_env.Variations, got {type(variations).__name__}")
-        if variations is not None and not randomize:
-            raise ValueError("variations= is used only with randomize=True")
         self.randomize = checks.flag("randomize", randomize)
-        self.variations: Variations = Variations() if variations is None else variations
-        if object_motion not in OBJECT_MOTIONS:
-            raise ValueError(f"unknown object_motion {object_motion!r}; expected one of {OBJECT_MOTIONS}")
-        self.object_motion = object_motion
-        weight = checks.real("reward_risk_weight", reward_risk_weight)
-        if not (math.isfinite(weight) and weight >= 0.0):
-            raise ValueError(f"reward_risk_weight must be finite and >= 0, got {reward_risk_weight!r}")
-        self.reward_risk_weight = weight
+        self.variations: Variations = arguments.check_variations(variations, self.randomize)
+        self.object_motion = checks.text("object_motion", object_motion, OBJECT_MOTIONS)
+        self.reward_risk_weight = arguments.check_weight(reward_risk_weight)
         self.estimators: tuple[RiskEstimator, ...] = make_estimators(risk_estimator, base)
         """One risk estimator per object of ``base_scenario``: their terms sum to ``info["risk"]``."""
         self.estimator: RiskEstimator = self.estimators[0]
         """The first object's estimator (its ``name`` is the env's risk estimator)."""
-        modes = self.metadata["render_modes"]
-        if render_mode is not None and render_mode not in modes:
-            raise ValueError(f"unknown render_mode {render_mode!r}; expected None or one of {modes}")
-        self.render_mode = render_mode
-        if renderer not in RENDERERS:
-            raise ValueError(f"unknown renderer {renderer!r}; expected one of {RENDERERS}")
-        self.renderer = renderer
+        self.render_mode = arguments.check_render_mode(render_mode, self.metadata["render_modes"])
+        self.renderer = checks.text("renderer", renderer, RENDERERS)
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / base.dt}
 
-        ego = base.ego
-        self.action_space = spaces.Box(
-            low=np.array([ego.v_min, -ego.omega_max], dtype=np.float32),
-            high=np.array([ego.v_max, ego.omega_max], dtype=np.float32),
-            dtype=np.float32,
-        )
-        low, high = observation.bounds(self.object_slots)
-        self.observation_space = spaces.Box(low=low, high=high, dtype=np.float32)
-
-        self._ego_pose: tuple[float, float, float] = ego.start.as_tuple()  # unwrapped
-        self._ego_input: tuple[float, float] = ego.initial_input
-        self._objects: list[tuple[float, ...]] | None = None  # each: c1, c2, theta, v, omega
+        self.action_space = spaces.Box(*observation.action_bounds(base.ego), dtype=np.float32)
+        self.observation_space = spaces.Box(*observation.bounds(self.object_slots), dtype=np.float32)
         self._uncertainties = base.uncertainties
         self._radii = base.collision_distances
-        self._present: np.ndarray = np.ones(len(base.objects), dtype=bool)
-        self._steps = 0
-        self._ended: str | None = None  # why the episode ended, until reset
-        self._plan: np.ndarray | None = None
-        self._last_risk = 0.0
-        self._episode_risk = 0.0
-        self._renderer: Any = None
+        self._start(base)
+        self._objects: list[tuple[float, ...]] | None = (
+            None  # each: c1, c2, theta, v, omega; None: no reset yet
+        )
+        self._view = EnvView(self.renderer, render_mode, self.metadata["render_fps"], self.estimator.name)
 
     # ---------------------------------------------------------------- properties
     @property
@@ -321,7 +286,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     @property
     def plan(self) -> np.ndarray | None:
         """The planned ego positions set by :meth:`set_plan` ``(M, 2)`` [m], or None."""
-        return None if self._plan is None else self._plan.copy()
+        return self._view.plan
 
     # ---------------------------------------------------------------- gym API
     def reset(
@@ -335,17 +300,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.randomize:
             self.scenario = vary(self.base_scenario, self.np_random, self.variations)
             self.close()  # the renderer draws the previous episode's path
-        s = self.scenario
-        self._ego_pose = s.ego.start.as_tuple()
-        self._ego_input = s.ego.initial_input
-        self._objects = [(*o.start.as_tuple(), o.speed, o.turn_rate) for o in s.objects]
-        self._present = np.arange(len(self._radii)) < len(s.objects)
-
-        self._steps = 0
-        self._ended = None
-        self._plan = None
-        self._last_risk = 0.0
-        self._episode_risk = 0.0
+        self._start(self.scenario)
+        self._view.set_plan(None)
         obs, info, _ = self._observe([0.0] * len(self._objects), 0.0, stepped=False)
         if self.render_mode == "human":
             self.render()
@@ -391,55 +347,34 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def render(self) -> np.ndarray | None:
         """``"rgb_array"``: the frame ``(H, W, 3)`` uint8; ``"human"``: draw to the window."""
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' or 'human' to"
-                f' gym.make("{ENV_ID}", ...)'
-            )
-            return None
-        self._require_reset()
-        if self._renderer is None:
-            fps = self.metadata["render_fps"]
-            self._renderer = make_renderer(
-                self.renderer, self.scenario, self.render_mode, fps, self.estimator.name
-            )
-        ego_x, ego_y, _ = self._ego_pose
-        lam = float(project(self.scenario.path, ego_x, ego_y))
-        return self._renderer.render(
-            ego_pose=np.array(self._ego_pose),
-            ego_speed=self._ego_input[0],
-            object_measurements=self.object_measurements,
-            plan=self._plan,
-            status=(
-                f"k = {self._steps}  t = {self._steps * self.scenario.dt:.1f} s",
-                f"risk = {self._last_risk:.4g}  (eps = {self.epsilon:g})",
-                f"lambda = {lam:.1f} m",
-            ),
-        )
+        if self.render_mode is not None:
+            self._require_reset()
+        pose, speed, objects = self._ego_pose, self._ego_input[0], self._objects
+        return self._view.frame(self.scenario, pose, speed, objects, self._steps, self._last_risk)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._view.close()
 
-    # ---------------------------------------------------------------- extras
     def set_plan(self, xy: np.ndarray | None) -> None:
         """Show a planned ego trajectory ``(M, 2)`` positions [m] in renders; None clears it.
 
         For benchmarks and demos only (agents read observations and never call this); the plan
         has no effect on the dynamics and is cleared by ``reset``.
         """
-        if xy is None:
-            self._plan = None
-            return
-        plan = np.array(xy, dtype=float)
-        if plan.ndim != 2 or plan.shape[1] != 2 or plan.shape[0] < 1:
-            raise ValueError(f"plan must have shape (M, 2) of positions [m], got {plan.shape}")
-        if not np.all(np.isfinite(plan)):
-            raise ValueError(f"plan has non-finite entries: {plan}")
-        self._plan = plan
+        self._view.set_plan(xy)
 
     # ---------------------------------------------------------------- internals
+    def _start(self, s: Scenario) -> None:
+        """The state at the start of an episode of ``s``."""
+        self._ego_pose: tuple[float, float, float] = s.ego.start.as_tuple()  # unwrapped
+        self._ego_input: tuple[float, float] = s.ego.initial_input
+        self._objects = [(*o.start.as_tuple(), o.speed, o.turn_rate) for o in s.objects]
+        self._present: np.ndarray = np.arange(len(self._radii)) < len(s.objects)
+        self._steps = 0
+        self._ended: str | None = None  # why the episode ended, until reset
+        self._last_risk = 0.0
+        self._episode_risk = 0.0
+
     def _require_reset(self) -> None:
         if self._objects is None:
             raise gym.error.ResetNeeded("call env.reset() before env.step() or env.render()")
@@ -447,42 +382,13 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     def _observe(
         self, terms: list[float], risk: float, stepped: bool
     ) -> tuple[np.ndarray, dict[str, Any], bool]:
-        """Observation, info and whether the goal is reached; the reward terms are 0 at reset."""
-        s = self.scenario
-        pose, objects = self._ego_pose, self._objects
-        seen = observe(
-            s.path, s.ego.v_ref, self._radii, pose, self._ego_input, objects, self.object_slots, None, MATH
+        """Observation, info and whether the goal is reached (:func:`~risk_env.envs.transition.view`);
+        the reward terms are 0 at reset."""
+        weight = self.reward_risk_weight if stepped else None
+        state = (self._ego_pose, self._ego_input, self._objects, self._present)
+        return view(
+            self.scenario, self._radii, self.object_slots, state, terms, risk, self._episode_risk, weight
         )
-        if stepped:
-            rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
-        else:
-            rewards = {"path_error": 0.0, "risk": 0.0}
-        if len(objects) == len(self._radii):
-            states = np.array(objects)[:, :4]
-        else:  # objects of the base scenario not in this episode: zeros
-            states = np.zeros((len(self._radii), 4))
-            states[: len(objects)] = [o[:4] for o in objects]
-            terms = [*terms, *[0.0] * (len(self._radii) - len(objects))]
-        collision, goal = seen.collision, seen.goal
-        info = {
-            "risk": risk,
-            "cost": risk,
-            "risk_terms": np.array(terms),
-            "episode_risk": self._episode_risk,
-            "risk_violation": risk > s.risk_tolerance,
-            "collision": collision,
-            "distance": seen.distance,
-            "closest_object": seen.closest,
-            "path_error": seen.path_error,
-            "lambda": seen.lam,
-            "ego": np.array((pose[0], pose[1], pose[2], self._ego_input[0])),
-            "object": states[0].copy(),
-            "objects": states,
-            "present": self._present.copy(),
-            "rewards": rewards,
-            "is_success": goal and not collision,
-        }
-        return seen.obs, info, goal
 
 
 _ENV_ARGUMENTS: tuple[str, ...] = tuple(

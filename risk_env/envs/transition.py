@@ -206,3 +206,53 @@ def observe(
 def reward_terms(error_norm: Any, risk: Any, risk_weight: float) -> dict[str, Any]:
     """The named reward terms of a step: ``-||e_{k+1}||`` and ``-w R_{k+1|k}``."""
     return {"path_error": 0.0 - error_norm, "risk": 0.0 - risk_weight * risk}
+
+
+def view(
+    scenario: Scenario,
+    radii: Sequence[float],
+    slots: int,
+    state: tuple[Sequence[float], Sequence[float], list[tuple[float, ...]], np.ndarray],
+    terms: Sequence[float],
+    risk: float,
+    episode_risk: float,
+    risk_weight: float | None,
+) -> tuple[np.ndarray, dict[str, Any], bool]:
+    """The single env's observation ``(10 + 6 K,)``, ``info`` (see
+    :class:`~risk_env.envs.env.RiskCrossingEnv`) and whether the goal is reached, from its
+    ``state``: the ego's pose (c1, c2, theta) and last input (v, omega), the episode's objects'
+    measurements (c1, c2, theta, v, omega) and which of the base scenario's M objects are
+    ``present``; ``radii``: r_e + r_o,i of the M objects; ``terms``: each episode object's R_i;
+    ``risk_weight``: the reward's w (None at reset: the reward terms are 0)."""
+    pose, ego_input, objects, present = state
+    seen = observe(scenario.path, scenario.ego.v_ref, radii, pose, ego_input, objects, slots, None, MATH)
+    if risk_weight is None:
+        rewards = {"path_error": 0.0, "risk": 0.0}
+    else:
+        rewards = reward_terms(seen.error_norm, risk, risk_weight)
+    if len(objects) == len(radii):
+        states = np.array(objects)[:, :4]
+    else:  # objects of the base scenario not in this episode: zeros
+        states = np.zeros((len(radii), 4))
+        states[: len(objects)] = [o[:4] for o in objects]
+        terms = [*terms, *[0.0] * (len(radii) - len(objects))]
+    collision, goal = seen.collision, seen.goal
+    info = {
+        "risk": risk,
+        "cost": risk,
+        "risk_terms": np.array(terms),
+        "episode_risk": episode_risk,
+        "risk_violation": risk > scenario.risk_tolerance,
+        "collision": collision,
+        "distance": seen.distance,
+        "closest_object": seen.closest,
+        "path_error": seen.path_error,
+        "lambda": seen.lam,
+        "ego": np.array((pose[0], pose[1], pose[2], ego_input[0])),
+        "object": states[0].copy(),
+        "objects": states,
+        "present": present.copy(),
+        "rewards": rewards,
+        "is_success": goal and not collision,
+    }
+    return seen.obs, info, goal

@@ -9,13 +9,31 @@ checked with its own start, speed, turn rate and uncertainty.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import Protocol
 
 from risk_env import checks
 from risk_env.observation import POSITION_BOUND, RATE_BOUND
+from risk_env.scenario.parts import CrossingObject, Ego, ReferencePath, Uncertainty
 
-if TYPE_CHECKING:
-    from risk_env.scenario.scenario import Scenario
+
+class Scenario(Protocol):
+    """What the reach of a scenario depends on (a :class:`~risk_env.scenario.scenario.Scenario`
+    has it all): its parts, the number of steps and the sample time."""
+
+    @property
+    def ego(self) -> Ego: ...
+    @property
+    def path(self) -> ReferencePath: ...
+    @property
+    def objects(self) -> Sequence[CrossingObject]: ...
+    @property
+    def uncertainties(self) -> Sequence[Uncertainty]: ...
+    @property
+    def max_steps(self) -> int: ...
+    @property
+    def dt(self) -> float: ...
+
 
 Reach = dict[str, tuple[float, float, str, str]]
 """``{part: (reach, bound, unit, fields)}``."""

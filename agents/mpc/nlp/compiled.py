@@ -14,12 +14,9 @@ import shutil
 import subprocess
 import tempfile
 import warnings
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import casadi as ca
-
-if TYPE_CHECKING:
-    from agents.mpc.nlp.solver import SolverSettings
 
 DEFAULT_JIT_CACHE = os.environ.get(
     "RISKMPC_JIT_CACHE", os.path.join(os.path.expanduser("~"), ".cache", "riskcrossing", "jit")
@@ -36,7 +33,13 @@ def have_c_compiler() -> bool:
     return bool(command) and shutil.which(command[0]) is not None
 
 
-def compiled_library(nlp: dict[str, Any], options: dict[str, Any], settings: SolverSettings) -> str | None:
+def compiled_library(
+    nlp: dict[str, Any],
+    options: dict[str, Any],
+    solver_name: str,
+    jit_opt: int,
+    jit_cache: str | os.PathLike[str] | None,
+) -> str | None:
     """The path of a shared library with the functions of ``nlp`` (the NLP and the derivatives the
     solver evaluates), from the disk cache when it holds this exact NLP, else compiled.
 
@@ -46,18 +49,20 @@ def compiled_library(nlp: dict[str, Any], options: dict[str, Any], settings: Sol
     NLP loads it in milliseconds. Nothing is written to the working directory and the process never
     changes directory. (CasADi's own ``jit`` option cannot promise that: in CasADi 3.8 nlpsol's jit
     writes its C source to the working directory whatever ``jit_options["directory"]`` says.)
+    ``solver_name`` is the nlpsol plugin (``"fatrop"`` or ``"ipopt"``), ``options`` its options;
+    ``jit_cache=None`` keeps the library in a per-process temporary directory.
     Returns None (with a warning) when code generation, compilation or loading fails.
     ``ca.nlpsol(name, solver, library, options)`` then builds a solver on it.
     """
     oracle = ca.Function("nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]], ["x", "p"], ["f", "g"])
-    solver = ca.nlpsol("mpc", settings.solver, oracle, options)  # for its derivative functions
+    solver = ca.nlpsol("mpc", solver_name, oracle, options)  # for its derivative functions
     names = [n for n in _COMPILED_FUNCTIONS if solver.has_function(n)]
     compiler = os.environ.get("CC", "gcc")
-    flags = [f"-O{settings.jit_opt}"]
+    flags = [f"-O{jit_opt}"]
     key = [ca.__version__, compiler, " ".join(flags), " ".join(names), oracle.serialize()]
     digest = hashlib.sha256("\n".join(key).encode()).hexdigest()[:24]
     name = f"riskmpc_{digest}"
-    cache = _private_cache() if settings.jit_cache is None else os.fspath(settings.jit_cache)
+    cache = _private_cache() if jit_cache is None else os.fspath(jit_cache)
     library = os.path.join(cache, f"{name}.so")
     try:
         if not os.path.exists(library):
@@ -78,7 +83,7 @@ def compiled_library(nlp: dict[str, Any], options: dict[str, Any], settings: Sol
                 partial = f"{library}.{os.getpid()}.tmp"
                 shutil.move(built, partial)
                 os.replace(partial, library)  # atomic: no process loads a half-written library
-        ca.nlpsol("mpc", settings.solver, library, options)  # loads: raises here, not in the caller
+        ca.nlpsol("mpc", solver_name, library, options)  # loads: raises here, not in the caller
         return library
     except Exception as err:  # a broken compiler must not break the agent
         detail = (getattr(err, "stderr", None) or b"").decode(errors="replace")[:300]

@@ -66,12 +66,17 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from types import SimpleNamespace
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from agents.mpc.nlp.parameters import (
+    SLOT_SIZE,
+    TERMS,
+    UNCERTAINTY_NUMBERS,
+    symbolic_uncertainty,
+)
 from risk_env.models.dynamics import casadi_step
 from risk_env.models.ops import CASADI
 from risk_env.models.path import path_error, timing_law
@@ -96,17 +101,9 @@ NX = 6
 NU = 3
 """Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
 
-SLOT_SIZE = 5 + 3 + 13
-"""Parameters per object slot: measurement (5), active, collision distance [m], mass [kg],
-uncertainty numbers (13)."""
-INACTIVE = 1e3
-"""Margin units added to an inactive slot's rows (so they hold, whatever the slot's numbers)."""
 Margin = Callable[[ca.SX, list[Belief], ca.SX, ca.SX, ca.SX, bool], ca.SX]
 """``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
 collision distance [m], mass [kg], zero) -> rows``: every row >= 0 iff the step's risk bound holds."""
-TERMS = 5
-"""Parameters of the risk terms (:mod:`agents.mpc.nlp.risk_budget`), at the end of p: the budget B, the risk
-spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
 RiskValue = Callable[[ca.SX, list[Belief], ca.SX, ca.SX], ca.SX]
 """``(ego (4,), beliefs (one per slot), risk data (K J, 3), slot numbers (K, 3)) -> R``: the agent's
 per-stage risk summed over the active slots (the budget's and the cost's)."""
@@ -209,7 +206,7 @@ def assemble(
 
     # --- parameters (parameter_vector's layout): epsilon; per slot its measurement, active flag,
     # collision distance, mass and uncertainty numbers; per-step risk data; the slots' beliefs
-    n_unc = len(_UNCERTAINTY_ORDER)
+    n_unc = UNCERTAINTY_NUMBERS
     p_eps = sym.sym("epsilon")
     p_vref = sym.sym("v_ref")
     p_slots = [sym.sym(f"slot_{k}", SLOT_SIZE) for k in range(slots)]
@@ -350,69 +347,6 @@ def variable_bounds(
     lbx[u_index] = (ego.v_min, -ego.omega_max, ego.v_min)
     ubx[u_index] = (ego.v_max, ego.omega_max, ego.v_max)
     return lbx, ubx
-
-
-_UNCERTAINTY_FIELDS = (
-    ("sigma0", 3),
-    ("sigma_growth", 3),
-    ("box_half_width0", 2),
-    ("box_growth", 3),
-    ("velocity_bounds0", 2),
-)
-
-
-_UNCERTAINTY_ORDER = tuple(f"{name}[{i}]" for name, length in _UNCERTAINTY_FIELDS for i in range(length))
-
-
-def uncertainty_vector(scenario: Scenario, index: int = 0) -> np.ndarray:
-    """Object ``index``'s :class:`~risk_env.scenario.scenario.Uncertainty` (the first object's by default)
-    as the solver's parameter vector (13,)."""
-    u = scenario.uncertainties[index]
-    return np.concatenate([np.asarray(getattr(u, name), float) for name, _ in _UNCERTAINTY_FIELDS])
-
-
-def slot_numbers(scenario: Scenario, slots: int) -> np.ndarray:
-    """The fixed numbers of each slot ``(K, 2 + 13)``: collision distance r_e + r_o [m], mass m_o
-    [kg] and uncertainty numbers; slot k takes object k's, the slots beyond the scenario's
-    objects the last object's."""
-    out = []
-    for k in range(slots):
-        i = min(k, len(scenario.objects) - 1)
-        obj = scenario.objects[i]
-        out.append([scenario.collision_distances[i], obj.mass, *uncertainty_vector(scenario, i)])
-    return np.array(out, dtype=float)
-
-
-def parameter_vector(
-    epsilon: float,
-    v_ref: float,
-    measurements: np.ndarray,
-    active: np.ndarray,
-    numbers: np.ndarray,
-    data: np.ndarray,
-    terms: np.ndarray | None = None,
-) -> np.ndarray:
-    """The solver's ``p``, the one layout of the module: epsilon, v_ref [m/s], per slot k its
-    measurement ``measurements[k]`` (5,), its ``active[k]`` flag and its ``numbers[k]``
-    (:func:`slot_numbers`: r_e + r_o, m_o, uncertainty (13,)), together :data:`SLOT_SIZE`; then
-    the per-stage risk data ``(N, K J, 3)`` (each stage's matrix column by column); last the
-    :data:`TERMS` numbers (``terms``; empty or None without a budget or weight)."""
-    blocks = [
-        np.concatenate([m, [float(a)], n[:2], n[2:]])
-        for m, a, n in zip(measurements, active, numbers, strict=True)
-    ]
-    tail = np.zeros(0) if terms is None else np.asarray(terms, float)
-    return np.concatenate([[epsilon, v_ref], *blocks, *(d.ravel(order="F") for d in data), tail])
-
-
-def symbolic_uncertainty(p: Any) -> SimpleNamespace:
-    """An uncertainty whose numbers are the entries of ``p`` (as :func:`uncertainty_vector` lays
-    them out), for :func:`risk_env.predict`."""
-    out, i = {}, 0
-    for name, length in _UNCERTAINTY_FIELDS:
-        out[name] = tuple(p[i + k] for k in range(length))
-        i += length
-    return SimpleNamespace(**out)
 
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:

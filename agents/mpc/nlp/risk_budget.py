@@ -18,7 +18,8 @@ accumulator c_n = R_1 + ... + R_{n-1} (c_1 = 0, c_{n+1} = c_n + R_n, a row of st
 N the row ``(B - spent_k - c_N - R_N) / B >= backoff`` (relative to B: the plan keeps ``backoff``,
 1e-3 by default, of the budget spare, so rounding of float32 observations and the solver's
 constraint tolerance of 1e-6 cannot carry the episode over B). B, spent_k, the normaliser 1/B, a
-switch-off and the weight are solver parameters (:data:`agents.mpc.nlp.ocp.TERMS`): one built solver serves
+switch-off and the weight are solver parameters (:data:`agents.mpc.nlp.parameters.TERMS`): one built
+solver serves
 every budget.
 
 *Why it holds.* If every step's hard problem is solved, spent_{k+1} = spent_k + R_{1|k} <= B -
@@ -55,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.mpc.nlp.ocp import TERMS
+from agents.mpc.nlp.parameters import TERMS
 
 
 def check_budget(value: Any, name: str = "risk_budget") -> float | None:
@@ -96,8 +97,8 @@ def effective_tolerance(epsilon: float, budget: float | None, backoff: float, sc
 
 
 def terms_parameters(budget: float | None, spent: float, weight: float | None) -> np.ndarray:
-    """The :data:`agents.mpc.nlp.ocp.TERMS` solver parameters: (B, spent, 1/B, switch-off, w); without a
-    budget (or at B = 0, where epsilon = 0 holds every R_n at 0) the row is switched off."""
+    """The :data:`agents.mpc.nlp.parameters.TERMS` solver parameters: (B, spent, 1/B, switch-off,
+    w); without a budget (or at B = 0, where epsilon = 0 holds every R_n at 0) the row is switched off."""
     on = budget is not None and budget > 0.0
     out = np.array(
         [budget or 0.0, spent, 1.0 / budget if on else 0.0, 0.0 if on else 1.0, weight or 0.0], dtype=float

@@ -51,11 +51,10 @@ from agents.mpc.nlp.ocp import (
     Margin,
     RiskValue,
     assemble,
-    parameter_vector,
-    slot_numbers,
     stage_functions,
     variable_bounds,
 )
+from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
 from risk_env.models.path import project
 from risk_env.scenario.scenario import Scenario
 
@@ -293,7 +292,13 @@ def build_problem(
         # the one library, whose compiled "nlp" leaves nothing to expand
         calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots)
         base["expand"] = False
-        library = compiled_library(calls, {**base, **settings.plugin_options(0)}, settings)
+        library = compiled_library(
+            calls,
+            {**base, **settings.plugin_options(0)},
+            settings.solver,
+            settings.jit_opt,
+            settings.jit_cache,
+        )
         jit = library is not None
         oracle = library if jit else nlp
         base["expand"] = not jit
