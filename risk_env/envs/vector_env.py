@@ -1,13 +1,11 @@
 """``RiskCrossing-v0`` batched: B copies stepped at once with numpy, the risk of the whole batch in
-one estimator call.
+one estimator call; ``gym.make_vec("RiskCrossing-v0", num_envs=64)`` builds it.
 
-``gym.make_vec("RiskCrossing-v0", num_envs=64)`` builds it (the spec's ``vector_entry_point``);
-``vectorization_mode="sync"`` or ``"async"`` builds Gymnasium's vector envs of single envs
-instead. Copy i behaves exactly like ``gym.make("RiskCrossing-v0", ...)`` reset with
-``seed + i``: the same arguments, its own generator drawn in the same order (for many copies
-all at once, :mod:`risk_env.envs.pcg64`), the same transition (:mod:`risk_env.envs.transition`: numpy arrays
-here, Python floats in the single env and for batches of up to :data:`SCALAR_COPIES`). Tests hold
-the modes to the same numbers to 1e-12 (risks: 1e-12 in probability).
+Copy i behaves exactly like ``gym.make("RiskCrossing-v0", ...)`` reset with ``seed + i``: the same
+arguments, its own generator drawn in the same order (for many copies all at once,
+:mod:`risk_env.envs.pcg64`), the same transition (:mod:`risk_env.envs.transition`: numpy arrays here,
+Python floats in the single env and for batches of up to :data:`SCALAR_COPIES`). Tests hold the
+modes to the same numbers to 1e-12 (risks: 1e-12 in probability).
 """
 
 from __future__ import annotations
@@ -161,7 +159,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             raise gym.error.ResetNeeded("call reset() before step()")
         n, s = self.num_envs, self.base_scenario
         mode = self.metadata["autoreset_mode"]
-        a = self._actions(actions)
+        a = checks.batch_actions(actions, self.num_envs)
         active = None  # None: every copy steps
         if self._autoreset.any():
             if mode == AutoresetMode.DISABLED:
@@ -171,7 +169,7 @@ class RiskCrossingVectorEnv(VectorEnv):
                 )
             self._reset_copies(self._autoreset)  # next-step autoreset: these copies only reset
             active = ~self._autoreset
-        self._check_actions(a, active)
+        checks.batch_actions_inside(a, self._action_low, self._action_high, self.base_scenario.ego, active)
         if active is not None:  # the reset copies are computed too, on a harmless input, and kept
             a[~active] = 0.0
         if n <= self.scalar_copies:
@@ -329,38 +327,6 @@ class RiskCrossingVectorEnv(VectorEnv):
             self._present[:, index] = np.arange(self._objects)[:, None] < counts[None, :]
         self._steps[index] = 0
         self._episode_risk[index] = 0.0
-
-    def _actions(self, actions: Any) -> np.ndarray:
-        """``actions`` as a new float array ``(B, 2)``; raises ``ValueError`` on a wrong shape."""
-        expected = f"numbers of shape ({self.num_envs}, 2)"
-        a = np.array(checks.real_array(actions, "actions", expected), dtype=float)  # a copy: changed later
-        if a.shape != (self.num_envs, 2):
-            raise ValueError(
-                f"actions must have shape ({self.num_envs}, 2) = (v [m/s], omega [rad/s]), got {a.shape}"
-            )
-        return a
-
-    def _check_actions(self, a: np.ndarray, active: np.ndarray | None) -> None:
-        """Raise ``ValueError`` naming the stepping copies whose actions the Box rejects."""
-        inside = (a >= self._action_low) & (a <= self._action_high)  # False for NaN
-        if inside.all():
-            return
-        bad_rows = ~inside.all(axis=1)
-        if active is not None:
-            bad_rows &= active
-        if not bad_rows.any():
-            return
-        ego = self.base_scenario.ego
-        non_finite = ~np.isfinite(a).all(axis=1)
-        for name, bad in (("non-finite", non_finite), ("outside the action space", ~non_finite)):
-            bad &= bad_rows
-            if bad.any():
-                rows = np.flatnonzero(bad)[:5].tolist()
-                raise ValueError(
-                    f"actions of copies {rows} are {name}: {a[rows].tolist()} (bounds v in"
-                    f" [{ego.v_min}, {ego.v_max}] m/s, |omega| <= {ego.omega_max} rad/s;"
-                    " the env clips nothing)"
-                )
 
     def _risk(self, ego_state: np.ndarray, beliefs: list[Belief], active: np.ndarray | None) -> np.ndarray:
         """The terms R_i ``(M, B)`` of ``ego_state (B, 4)`` against the beliefs ``(B,)`` of each
