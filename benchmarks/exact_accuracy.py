@@ -18,7 +18,7 @@ of both axes' standard deviations and where the chord's ends cross them. Integra
 orders; their largest disagreement is printed as the reference's own accuracy.
 
 Printed per path of the estimator (the env's numpy batch and scalar kernels, the generic numpy
-form, the SMPC's CasADi form :meth:`~risk_env.risk.ExactRisk.solver_risk`): the largest absolute
+form, the SMPC's CasADi form :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`): the largest absolute
 error, the largest shortfall below the reference (the unsafe side) and how many fall short by more
 than 1e-5. Targets: at most 1e-4 absolute, never short by more than 1e-5.
 """
@@ -34,9 +34,9 @@ from scipy import integrate
 
 from benchmarks import cli
 from risk_env import Belief, Scenario
-from risk_env.disc import disc_probability, signed_box_distance
-from risk_env.frame import from_frame
+from risk_env.models.frame import from_frame
 from risk_env.risk import ExactRisk
+from risk_env.risk.disc import disc_probability, signed_box_distance
 
 RADIUS = Scenario().collision_distance
 """r = r_e + r_o [m]: the scenario's."""

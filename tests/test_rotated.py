@@ -11,8 +11,8 @@ import pytest
 from scipy import stats
 
 from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
-from risk_env.frame import from_frame, to_frame
-from risk_env.ops import MATH, NUMPY
+from risk_env.models.frame import from_frame, to_frame
+from risk_env.models.ops import MATH, NUMPY
 from risk_env.risk import WorstCaseRisk
 from risk_env.scenario import SEVERITY_NAMES
 
