@@ -139,6 +139,22 @@ def unit_interval(text: str) -> float:
     return value
 
 
+def unit_interval_closed(text: str) -> float:
+    """``type=`` of a number in [0, 1]."""
+    value = _number(text)
+    if not 0 <= value <= 1:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
+    return value
+
+
+def discount(text: str) -> float:
+    """``type=`` of a discount factor in (0, 1]."""
+    value = _number(text)
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"expected a discount factor in (0, 1], got {text!r}")
+    return value
+
+
 def time_cap(text: str) -> float:
     """``type=`` of a wall-time cap [s]: > 0, ``inf`` for none."""
     value = _number(text)
@@ -286,3 +302,18 @@ class Renamed(argparse.Action):
 
         print(f"{parser.prog}: {option_string} is deprecated, use {self.new}", file=sys.stderr)
         setattr(namespace, self.dest, values)
+
+
+class CommaList(argparse.Action):
+    """A comma-list flag (``type=`` reads the list) that tells the space-separated spelling of
+    earlier versions (``--num-envs 1 64``) what it is now (``--num-envs 1,64``)."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs: Any) -> None:
+        kwargs.setdefault("nargs", "+")
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option_string: str | None = None) -> None:
+        if len(values) > 1:
+            joined = ",".join(str(x) for value in values for x in value)
+            parser.error(f"argument {option_string}: takes a comma list now: {option_string} {joined}")
+        setattr(namespace, self.dest, values[0])

@@ -18,7 +18,7 @@ from typing import Any
 DOCS = "docs/reproduction.md"
 """The docs page (in the repository) that explains the reproduction and its deviations."""
 COLUMNS = (
-    "e_acc: the accumulated path error, the sum over the run's steps of ||e_k|| (lower: nearer the path)",
+    "e_acc: the accumulated path error, the sum over the run's steps of ||e_k|| (lower: nearer path)",
     "d_min: the smallest centre distance to an object over the run [m] (a collision below r_e + r_o)",
     "failed solver steps: steps where the MPC's solver found no plan and a fallback level acted",
 )
@@ -65,12 +65,12 @@ def agent_table(rows: list[dict[str, Any]]) -> list[str]:
     for r in rows:
         groups.setdefault((r["method"], r["risk_method"]), []).append(r)
     lines = [
-        f"{'agent':<20}{'runs':>5}{'collided':>10}{'failed solver steps':>21}"
+        f"{'agent':<18}{'runs':>5}{'collided':>9}{'failed solver steps':>21}"
         f"{'e_acc':>13}{'d_min [m]':>11}{'solve p95 [ms]':>16}"
     ]
     for (method, variant), sel in groups.items():
         lines.append(
-            f"{_label(method, variant):<20}{len(sel):>5}{sum(bool(r['collided']) for r in sel):>10}"
+            f"{_label(method, variant):<18}{len(sel):>5}{sum(bool(r['collided']) for r in sel):>9}"
             f"{sum(int(r['failed_solves']) for r in sel):>21}{_range([r['e_acc'] for r in sel]):>13}"
             f"{_range([r['d_min'] for r in sel]):>11}{max(r['solve_ms_p95'] for r in sel):>16.1f}"
         )
