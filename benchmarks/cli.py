@@ -74,7 +74,13 @@ def examples(doc: str) -> list[str]:
         else:
             continue
         going = line.endswith("\\")
-    return [" ".join(c.split()) for c in out]
+    return [_tidy(c) for c in out]
+
+
+def _tidy(command: str) -> str:
+    """``command`` with single spaces, a trailing ``# comment`` two spaces after it."""
+    code, hash_, comment = command.partition(" #")
+    return " ".join(code.split()) + (f"  # {comment.strip()}" if hash_ else "")
 
 
 def _number(text: str) -> float:

@@ -103,7 +103,8 @@ def test_every_command_has_a_working_help_without_abbreviations(name):
     parser = _parser(name)
     assert parser.allow_abbrev is False
     text = parser.format_help()
-    assert "  " not in " ".join(line.strip() for line in text.splitlines() if "python -m" in line)
+    commands = [line.split("#")[0].strip() for line in text.splitlines() if "python -m" in line]
+    assert not any("  " in command for command in commands), "runs of spaces in an example"
     assert not any(line.rstrip().endswith("\\") for line in text.splitlines()), "a dangling backslash"
     for action in parser._actions:
         if action.help and action.help != argparse.SUPPRESS:
