@@ -297,3 +297,26 @@ def test_table2_and_sampled_run_a_scene_with_several_objects(tmp_path):
     assert "Scene two_crossing" in (tmp_path / "s" / "sampled.md").read_text()
     with pytest.raises(SystemExit):
         table2.parse_args(["--scene", "three_crossing"])
+
+
+def test_claims_say_lower_only_when_strictly_lower_and_name_ties():
+    from benchmarks.claims import chain
+
+    base = dict(uncertainty="low", collided=False)
+    rows = [
+        {**base, "method": "RMPC", "risk_method": "worst_case", "epsilon": 0.0, "e_acc": 50.0, "d_min": 8.0},
+        {**base, "method": "SMPC", "risk_method": "exact", "epsilon": 0.0, "e_acc": 50.0, "d_min": 8.0},
+        {
+            **base,
+            "method": "RMPC",
+            "risk_method": "worst_case",
+            "epsilon": 500.0,
+            "e_acc": 50.0,
+            "d_min": 8.0,
+        },
+        {**base, "method": "SMPC", "risk_method": "exact", "epsilon": 500.0, "e_acc": 40.0, "d_min": 3.0},
+    ]
+    claims = {claim: (ok, evidence) for claim, ok, evidence in table2.check_claims(rows)}
+    ok, evidence = claims["SMPC (exact) at or below RMPC (worst_case) in e_acc and d_min"]
+    assert ok and evidence == "e_acc lower in 1 of 2 runs, tied in 1; d_min lower in 1 of 2 runs, tied in 1"
+    assert chain([8.11, 1.92, 1.92, 2.5]) == "8.11 > 1.92 = 1.92 < 2.50"
