@@ -39,7 +39,7 @@ import shlex
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -374,6 +374,23 @@ class OutputSet:
         tmp.write_text(json.dumps(manifest, indent=2) + "\n")
         os.replace(tmp, self.manifest_path)
 
-    def files(self) -> Iterator[Path]:
-        """The final paths of the files written so far (for messages)."""
-        return (self.out / n for n in self.written())
+    def adopt(self, note: str) -> dict[str, Any]:
+        """Write a manifest for this set's files already in ``out`` (results that predate
+        manifests), as if this configuration had written them; ``note`` says so. Nothing runs."""
+        files = self.existing()
+        if self.manifest() is not None or not files:
+            raise OutputError("--out", f"--out {self.out}: no {self.name} files without a manifest")
+        manifest = {
+            "set": self.name,
+            "command": self.command_line,
+            "options": jsonable({k: v for k, v in self.options.items() if k not in ("overwrite", "resume")}),
+            "configuration": self.config,
+            "version": None,
+            "git_commit": None,
+            "started": None,
+            "finished": None,
+            "adopted": note,
+            "files": {p.name: _digest(p) for p in files},
+        }
+        self.manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+        return manifest

@@ -45,6 +45,19 @@ def test_a_run_writes_its_set_with_a_manifest_and_removes_what_it_did_not_write(
     assert sorted(p.name for p in out.iterdir()) == ["demo.csv", "demo.manifest.json", "other_command.csv"]
 
 
+def test_results_older_than_manifests_can_be_adopted_by_their_command(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "demo.csv").write_text("computed before manifests")
+    with pytest.raises(OutputError, match="without a manifest"):
+        _set(out).check()
+    manifest = _set(out).adopt("computed earlier by this command")
+    assert manifest["adopted"] and list(manifest["files"]) == ["demo.csv"]
+    _set(out).check()  # the same configuration now reruns without a flag
+    with pytest.raises(OutputError, match="another configuration"):
+        _set(out, k=2).check()
+
+
 def test_another_configuration_needs_overwrite_and_a_failed_run_changes_nothing(tmp_path):
     out = tmp_path / "out"
     with _set(out) as run:
