@@ -2,7 +2,7 @@
 
     python -m benchmarks.train_ppo --lagrangian --seeds 5 --out agents/models --name ppo_lagrangian
     python -m benchmarks.train_ppo --out agents/models --name ppo_penalty      # the shipped policies
-    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \
+    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \\
         --checkpoint-every 0 --out agents/models --name ppo_lagrangian_two_crossing   # two objects
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
