@@ -81,12 +81,13 @@ def save_gif(frames: list[np.ndarray], path: Path, fps: float) -> Path:
     return path
 
 
-def make_agent(name: str, scenario: Any) -> Any:
-    """The MPC ``name`` (``rmpc[:RISK]`` or ``smpc[:RISK]``) for ``scenario``."""
+def make_agent(name: str, scenario: Any, **options: Any) -> Any:
+    """The MPC ``name`` (``rmpc[:RISK]`` or ``smpc[:RISK]``) for ``scenario`` (``options``: the
+    MPC's, e.g. the ``object_slots`` the intersection adapter asks for)."""
     from agents import RMPC, SMPC
 
     agent = parse_agent(name, ("rmpc", "smpc"), tolerance=False, budget=False)
-    return (RMPC if agent.kind == "rmpc" else SMPC)(scenario, risk=agent.variant)
+    return (RMPC if agent.kind == "rmpc" else SMPC)(scenario, risk=agent.variant, **options)
 
 
 def file_tag(name: str) -> str:

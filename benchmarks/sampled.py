@@ -21,7 +21,8 @@ per episode (it should match the mean episode risk), e_acc, d_min and the goal r
 ``--budgets`` adds a row per episode risk budget B (in the severity's own unit, checked as the
 tolerances are) for each SMPC agent, built with ``risk_budget=B`` and no per-step bound
 (:mod:`benchmarks.budget_rows`, written to ``budget.csv`` and a second table of ``sampled.md``).
-With ``--budgets`` and no ``--tolerances`` the agents that take no budget (RMPC, PPO) run at
+The PPO policies read epsilon in J, so their rows are the paper severity's only. With
+``--budgets`` and no ``--tolerances`` the agents that take no budget (RMPC, PPO) run at
 epsilon = 0 and the SMPC agents run the budget rows only.
 
     python -m benchmarks.sampled --agents rmpc:worst_case,smpc:exact --severities probability \\
@@ -127,6 +128,12 @@ def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None 
         args.budgets = parse_tolerances(args.budgets, args.severities, "budget") if args.budgets else {}
     except ValueError as error:
         p.error(str(error))
+    ppo = [a for a in args.agents if AGENTS[a][0] == "PPO"]
+    if ppo and "paper" not in args.severities:
+        p.error(
+            f"argument --agents: {', '.join(ppo)} read epsilon in the paper severity's unit (J);"
+            " run them with --severities paper"
+        )
     if args.budgets and not any(AGENTS[a][0] == "SMPC" for a in args.agents):
         p.error("argument --budgets: the budget rows are the SMPC agents'; --agents names none")
     args.only_budgets = only_budgets
@@ -186,6 +193,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         for a in args.agents
         if not (args.only_budgets and a in smpc)
         for s in args.severities
+        if s == "paper" or AGENTS[a][0] != "PPO"  # the policies read epsilon in J
         for u in args.uncertainty
         for e in args.tolerances[s]
     ]

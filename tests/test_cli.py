@@ -154,7 +154,7 @@ SMALLEST = {
     "highway_render": {"--max-steps": "2"},
     "train_ppo": {
         "--total-timesteps": "64",
-        "--num-envs": "2",
+        "--num-envs": "3",
         "--n-steps": "32",
         "--batch-size": "32",
         "--eval-episodes": "1",
