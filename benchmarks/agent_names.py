@@ -9,7 +9,7 @@ The grammar (parts separated by colons; brackets: optional)::
 
 ``SEVERITY`` is one of :data:`risk_env.scenario.SEVERITY_NAMES` and ``TOLERANCE`` the per-step
 bound epsilon in that severity's own unit (J, probability, injuries); ``budget=B`` gives the SMPC
-an episode risk budget (``risk_budget=B``, :mod:`agents.risk_budget`), with no per-step bound
+an episode risk budget (``risk_budget=B``, :mod:`agents.mpc.nlp.risk_budget`), with no per-step bound
 unless a tolerance is given too. A command that sweeps the tolerance itself (``table2``,
 ``sampled``, ``timing``) takes agents without one. Lists are comma-separated:
 ``--agents rmpc,smpc:paper:1000,idm``.
@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from risk_env.scenario import SEVERITY_NAMES
+from risk_env.scenario.scenario import SEVERITY_NAMES
 
 RISKS: dict[str, tuple[str, ...]] = {"rmpc": ("worst_case", "grid"), "smpc": ("exact", "monte_carlo")}
 """The risk estimators of each MPC; the first is the default."""
@@ -148,7 +148,7 @@ def parse_agent(
             )
         severity = parts[0]
         epsilon = _value(parts[1], name, "tolerance")
-        from risk_env.severity import check_tolerance
+        from risk_env.risk.severity import check_tolerance
 
         check_tolerance(epsilon, severity, f"agent {name!r}: the tolerance")
     if spent is not None and not (math.isfinite(spent) and spent >= 0):

@@ -51,8 +51,8 @@ from benchmarks import cli
 from benchmarks.agent_names import AgentName, parse_agent
 from benchmarks.sampled_rows import wilson
 from benchmarks.sweep import run_sweep
-from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
-from risk_env.severity import check_tolerance
+from risk_env.risk.severity import check_tolerance
+from risk_env.scenario.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 KINDS = ("rmpc", "smpc", "idm")
 FILES = ("intersection.csv", "intersection.md", "intersection_episodes.csv")

@@ -127,7 +127,7 @@ def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], in
     from risk_env.highway import IntersectionAdapter, RiskCostWrapper, make_intersection_env
     from risk_env.highway.adapter import ADAPTER_DEFAULTS, reached
     from risk_env.highway.graphics import render_scene
-    from risk_env.prediction import predict
+    from risk_env.prediction.belief import predict
 
     radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
     env = RiskCostWrapper(
@@ -215,7 +215,7 @@ def parse_args(
     if len(args.agent) != 1:
         parser.error("argument --agent: one agent, not a list")
     args.agent = str(args.agent[0])
-    from risk_env.severity import check_tolerance
+    from risk_env.risk.severity import check_tolerance
 
     try:
         check_tolerance(args.tolerance, "paper", "argument --tolerance:")

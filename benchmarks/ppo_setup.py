@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from risk_env.scenes import scene_objects
+from risk_env.scenario.scenes import scene_objects
 
 
 def levels(args: Any) -> list[str]:
@@ -23,9 +23,9 @@ def tolerances(args: Any) -> list[float]:
 
 
 def feature_spec(args: Any, dt: float) -> Any:
-    """The :class:`agents.ppo.FeatureSpec` of the run (None: unconditioned, 14 features), with
+    """The :class:`agents.ppo.policy.FeatureSpec` of the run (None: unconditioned, 14 features), with
     one slot per object of ``--scene``."""
-    from agents.ppo import FeatureSpec
+    from agents.ppo.policy import FeatureSpec
 
     if not args.conditioned:
         if args.scene != "paper":
@@ -40,8 +40,8 @@ def make_env(args: Any) -> Any:
     (episode return, length, cost, collision, success) -> VecNormalize (rewards only)."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from agents.ppo import InputLimits
-    from agents.ppo_env import LevelMix, PolicyView, RewardWeights, SB3VecEnv
+    from agents.ppo.policy import InputLimits
+    from agents.ppo.training import LevelMix, PolicyView, RewardWeights, SB3VecEnv
 
     env = LevelMix(
         args.num_envs,

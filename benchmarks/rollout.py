@@ -31,7 +31,7 @@ AGENTS: dict[str, tuple[str, str]] = {
 the training of a PPO policy."""
 
 SCENE_AGENTS: dict[str, str] = {"ppo:lagrangian_two_crossing": "two_crossing"}
-"""Agents that see every object slot of one scene (risk_env.scenes) and run there only: the PPO
+"""Agents that see every object slot of one scene (risk_env.scenario.scenes) and run there only: the PPO
 policy trained with ``--scene two_crossing`` (its observation has that scene's slot count)."""
 
 
@@ -60,7 +60,7 @@ def build(agent: AgentName, env: gym.Env, seed: int = 0, **options: Any) -> Any:
 def build_agent(method: str, variant: str, env: gym.Env, seed: int = 0, **options: Any) -> Any:
     """The agent ``(method, variant)`` of :data:`AGENTS` for ``env``'s scenario and tolerance."""
     if method == "PPO":
-        from agents.ppo import PPOAgent, shipped_model
+        from agents.ppo.policy import PPOAgent, shipped_model
 
         return PPOAgent.load(shipped_model(variant), scenario=env.unwrapped.scenario)
     from agents import RMPC, SMPC
@@ -158,7 +158,7 @@ class EpisodeRecord:
 
 def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
     """Run one episode of ``agent`` (anything with ``predict(obs) -> (action, state)``) in ``env``."""
-    from risk_env.severity import make_severity
+    from risk_env.risk.severity import make_severity
 
     obs, info = env.reset(seed=seed)
     if hasattr(agent, "reset"):
@@ -211,7 +211,7 @@ def rollout(agent: Any, env: gym.Env, seed: int | None = None) -> EpisodeRecord:
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.rollout``."""
-    from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
+    from risk_env.scenario.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
     p = cli.parser("rollout", __doc__)
     p.add_argument("--agent", default="smpc:exact", help="the agent (benchmarks.agent_names)")
@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> EpisodeRecord:
         agent = parse_agent(args.agent).with_defaults(args.severity, args.tolerance)
         if agent.kind == "idm":
             raise ValueError("idm drives in highway-env only (python -m benchmarks.highway_intersection)")
-        from risk_env.severity import check_tolerance
+        from risk_env.risk.severity import check_tolerance
 
         check_tolerance(args.tolerance, args.severity, "--tolerance")
     except ValueError as error:

@@ -43,7 +43,7 @@ from benchmarks.budget_rows import BUDGET_COLUMNS, markdown_budget, summarise_bu
 from benchmarks.rollout import AGENTS, available_agents
 from benchmarks.sampled_rows import COLUMNS, Job, markdown, run_job, summarise, wilson
 from benchmarks.sweep import run_sweep
-from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
+from risk_env.scenario.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 __all__ = ["COLUMNS", "Job", "main", "markdown", "parse_tolerances", "run_job", "summarise", "wilson"]
 FILES = ("sampled.csv", "sampled.md", "budget.csv")
@@ -86,7 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
         " each SMPC agent (risk_budget=B, no per-step bound); repeat as SEVERITY=B,... (default: none)",
     )
     p.add_argument(
-        "--scene", default="paper", choices=SCENE_NAMES, help="which road users cross (risk_env.scenes)"
+        "--scene",
+        default="paper",
+        choices=SCENE_NAMES,
+        help="which road users cross (risk_env.scenario.scenes)",
     )
     p.add_argument(
         "--max-solve-time",
@@ -148,9 +151,9 @@ def parse_tolerances(
 
     A group ``"A,B"`` applies to every severity without a group of its own ``"NAME=A,B"``. Raises
     ``ValueError`` naming a value that is not a number, or not one of its severity's unit
-    (:func:`risk_env.severity.check_tolerance`), and a severity left without tolerances.
+    (:func:`risk_env.risk.severity.check_tolerance`), and a severity left without tolerances.
     """
-    from risk_env.severity import check_tolerance
+    from risk_env.risk.severity import check_tolerance
 
     common: list[float] | None = None
     own: dict[str, list[float]] = {}

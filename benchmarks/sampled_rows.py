@@ -73,8 +73,8 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     import gymnasium as gym
 
     import risk_env  # noqa: F401
-    from risk_env.ops import NUMPY
-    from risk_env.severity import make_severity
+    from risk_env.models.ops import NUMPY
+    from risk_env.risk.severity import make_severity
 
     env = gym.make(
         "RiskCrossing-v0",
@@ -130,8 +130,8 @@ def _sig(x: float, digits: int = 4) -> float:
 
 
 def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    from risk_env.scenario import Scenario
-    from risk_env.severity import make_severity
+    from risk_env.risk.severity import make_severity
+    from risk_env.scenario.scenario import Scenario
 
     n = len(episodes)
     collisions = sum(e["collision"] for e in episodes)
@@ -176,7 +176,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     lines = [
         "# Sampled object motion: does epsilon bound what happens?",
         "",
-        *([f"Scene {', '.join(scenes)} (risk_env.scenes).", ""] if scenes != ["paper"] else []),
+        *([f"Scene {', '.join(scenes)} (risk_env.scenario.scenes).", ""] if scenes != ["paper"] else []),
         "Risks, eps and harm in the severity's own unit (given with eps). Harm/step = mean realised",
         "I_C s per step; with calibrated risk it matches Risk mean (both are per-step expected harm).",
         "Episode risk = info['episode_risk'], the summed risk of an episode (mean and max over",

@@ -32,7 +32,7 @@ from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_ag
 from benchmarks.summary import summary
 from benchmarks.sweep import run_sweep
 from benchmarks.table2_report import CSV_COLUMNS, markdown, write_csv
-from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, Scenario
+from risk_env.scenario.scenario import SCENE_NAMES, SEVERITY_NAMES, Scenario
 
 __all__ = [
     "CSV_COLUMNS",
@@ -198,7 +198,10 @@ def build_parser() -> argparse.ArgumentParser:
         resume=True,
     )
     p.add_argument(
-        "--scene", default="paper", choices=SCENE_NAMES, help="which road users cross (risk_env.scenes)"
+        "--scene",
+        default="paper",
+        choices=SCENE_NAMES,
+        help="which road users cross (risk_env.scenario.scenes)",
     )
     cli.add_sweep_options(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -218,7 +221,7 @@ def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None 
 
     if bad := [a for a in args.agents if SCENE_AGENTS.get(a, args.scene) != args.scene]:
         p.error(f"argument --agents: {', '.join(bad)} runs in --scene {SCENE_AGENTS[bad[0]]} only")
-    from risk_env.severity import check_tolerance
+    from risk_env.risk.severity import check_tolerance
 
     try:
         for t in args.tolerances:

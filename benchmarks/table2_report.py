@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.claims import LEVELS, Claim
-from risk_env.scenario import Scenario
+from risk_env.scenario.scenario import Scenario
 
 CSV_COLUMNS = (
     "agent",
@@ -52,7 +52,10 @@ def markdown(
 ) -> str:
     lines = ["# Table II: ours beside the paper's", ""]
     if scene != "paper":
-        lines += [f"Scene `{scene}` (risk_env.scenes): the paper's figures are for its one-object scene.", ""]
+        lines += [
+            f"Scene `{scene}` (risk_env.scenario.scenes): the paper's figures are for its one-object scene.",
+            "",
+        ]
     lines.append(
         "Each cell: ours (paper). e_acc: the accumulated path error, sum over the steps of ||e_k||;"
         " d_min: the smallest centre distance to an object [m]. `*` marks a collision."
@@ -118,7 +121,7 @@ def markdown(
 
 def _unit(severity: str) -> str:
     """The unit of the severity named ``severity`` (J, probability, injuries)."""
-    from risk_env.severity import make_severity
+    from risk_env.risk.severity import make_severity
 
     return make_severity(Scenario(severity=severity)).unit
 

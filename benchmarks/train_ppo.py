@@ -7,13 +7,14 @@
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
 The copies are split over the uncertainty levels and draw epsilon per episode; the policy is
-told both (:class:`agents.ppo.FeatureSpec`). Reward per step (:class:`agents.ppo_env.RewardWeights`):
+told both (:class:`agents.ppo.policy.FeatureSpec`). Reward per step
+(:class:`agents.ppo.training.RewardWeights`):
 ``-w_e ||e_{k+1}|| + w_p (lambda_{k+1} - lambda_k) + w_g [goal] - beta c_k``, with the cost
 ``c_k = max(0, R_{k+1|k} - epsilon) / cost_scale + collision_cost [collision]``. ``--lagrangian``
 adapts beta after every rollout by dual ascent, ``beta <- max(0, beta + dual_lr (mean episode
 cost - cost_limit))``. Writes ``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits,
 features, wall time and training throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's
-CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.PPOAgent.load` reads the model back. ``--seeds N``
+CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.policy.PPOAgent.load` reads the model back. ``--seeds N``
 trains N seeds, scores them and ships the best (:func:`train_seeds`).
 """
 
@@ -33,8 +34,8 @@ from typing import Any
 
 from benchmarks import cli
 from benchmarks.ppo_setup import feature_spec, levels, make_callbacks, make_env, tolerances
-from risk_env.scenario import UNCERTAINTY_PRESETS
-from risk_env.scenes import SCENE_NAMES
+from risk_env.scenario.parts import UNCERTAINTY_PRESETS
+from risk_env.scenario.scenes import SCENE_NAMES
 
 __all__ = ["Args", "feature_spec", "levels", "main", "make_callbacks", "make_env", "parse_args", "tolerances"]
 NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
@@ -88,7 +89,7 @@ class Args:
     tolerances: str = "0,500,1000,1500,2000,2500"
     """Comma list of epsilon [the severity's unit], one drawn per episode (the paper's Table II)."""
     conditioned: bool = True
-    """Show the policy epsilon and the uncertainty (agents.ppo.FeatureSpec)."""
+    """Show the policy epsilon and the uncertainty (agents.ppo.policy.FeatureSpec)."""
     prediction: bool = True
     """Also show the object's predicted means and truncation boxes over the horizon."""
     forward_only: bool = True
@@ -99,8 +100,8 @@ class Args:
     object_motion: str = "sampled"
     """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
     scene: str = "paper"
-    """Which road users cross (risk_env.scenes): the policy sees every one of the scene's object
-    slots (agents.ppo.FeatureSpec ``slots``; one slot: the paper's features)."""
+    """Which road users cross (risk_env.scenario.scenes): the policy sees every one of the scene's object
+    slots (agents.ppo.policy.FeatureSpec ``slots``; one slot: the paper's features)."""
     randomize: bool = False
     """Train on seeded variations of the scenario (curvature, starts, object speed); off: the
     paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
@@ -123,7 +124,7 @@ class Args:
     """Adapt beta by dual ascent toward cost_limit."""
     cost_limit: float = 0.02
     """Per-episode cost the Lagrangian aims at: the mean over the rollout's finished episodes of
-    sum_k c_k (agents.ppo_env.RewardWeights: a collision counts collision_cost)."""
+    sum_k c_k (agents.ppo.training.RewardWeights: a collision counts collision_cost)."""
     dual_lr: float = 5.0
     """Step size of the dual ascent on beta [beta per unit of episode cost]."""
     n_steps: int = 128
@@ -221,7 +222,7 @@ def parse_args(argv: list[str] | None = None, parser: argparse.ArgumentParser | 
         epsilons = cli.numbers_list(cli.nonnegative_float)(args.tolerances)
     except argparse.ArgumentTypeError as error:
         parser.error(f"argument --tolerances: {error}")
-    from risk_env.severity import check_tolerance
+    from risk_env.risk.severity import check_tolerance
 
     try:
         for eps in epsilons:
@@ -252,7 +253,7 @@ def train(args: Args, shown: Path | None = None) -> dict[str, Any]:
     from stable_baselines3 import PPO
     from stable_baselines3.common.logger import configure
 
-    from agents.ppo import FEATURES, InputLimits
+    from agents.ppo.policy import FEATURES, InputLimits
 
     torch.set_num_threads(1)  # small networks: threads cost more than they give on 2 cores
     args.out.mkdir(parents=True, exist_ok=True)
