@@ -117,6 +117,8 @@ def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None 
     args = p.parse_args(argv)
     if args.agents is None:
         args.agents = [a for a in available_agents(args.scene) if a != "rmpc:grid"]
+        if "paper" not in args.severities:  # the policies read epsilon in J
+            args.agents = [a for a in args.agents if AGENTS[a][0] != "PPO"]
     else:
         args.agents = [str(a) for a in args.agents]
     from benchmarks.rollout import SCENE_AGENTS
