@@ -11,9 +11,9 @@
    ``--estimator monte_carlo`` adds the env's Monte Carlo draws to the frames).
 2. ``--intersection``: one ``intersection-v1`` episode (seed ``--intersection-seed``) driven by the
    same kind of agent through :class:`risk_env.highway.IntersectionAdapter`, drawn with
-   :func:`risk_env.highway.graphics.render_scene`: the route, the chosen object's truncation boxes
-   and the MPC's plan. Saved as ``intersection_<agent>.gif`` and, for the step where the ego came
-   closest to its chosen object, ``intersection_frame.png``.
+   :func:`risk_env.highway.graphics.render_scene`: the route, the nearest planned-for vehicle's
+   truncation boxes and the MPC's plan. Saved as ``intersection_<agent>.gif`` and, for the step
+   where the ego came closest to that vehicle, ``intersection_frame.png``.
 
 Headless: frames are drawn on plain surfaces (no display needed). The files are one output set
 (:mod:`benchmarks.output`).
@@ -143,15 +143,15 @@ def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], in
     frames, gaps, done, k = [], [], False, 0
     while not done:
         action, _ = adapter.predict(obs)
-        obj, ego = adapter.last_object, env.unwrapped.vehicle
-        report = adapter.last_solve
+        ego, report = env.unwrapped.vehicle, adapter.last_solve
+        nearest = adapter.last_objects[:1]  # the nearest vehicle planned against (none: empty)
         frames.append(
             render_scene(
                 env,
                 route=adapter.route.polyline(),
-                beliefs=predict(adapter.scenario, obj)[1:],
+                beliefs=[b for obj in nearest for b in predict(adapter.scenario, obj)[1:]],
                 plan=report.ego_trajectory,
-                highlight=(obj[0], obj[1], adapter.scenario.object.radius),
+                highlight=None if not len(nearest) else (*nearest[0][:2], adapter.scenario.object.radius),
                 status=(
                     f"k = {k}  t = {k * adapter.dt:.1f} s  {args.agent} on lane {adapter.lane}",
                     f"risk = {info['risk']:.3g} (all vehicles, eps = {args.tolerance:g})",
@@ -159,7 +159,7 @@ def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], in
                 ),
             )
         )
-        gaps.append(float(np.hypot(*(ego.position - obj[:2]))))
+        gaps.append(float(np.hypot(*(ego.position - nearest[0][:2]))) if len(nearest) else np.inf)
         obs, _, terminated, truncated, info = env.step(action)
         done, k = terminated or truncated, k + 1
     summary = {
