@@ -25,6 +25,7 @@ than 1e-5. Targets: at most 1e-4 absolute, never short by more than 1e-5.
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 
@@ -147,16 +148,19 @@ def estimates(cases: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     }
 
 
-def main(argv: list[str] | None = None) -> dict[str, tuple[float, float, int]]:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.exact_accuracy``."""
     parser = cli.parser("exact_accuracy", __doc__)
-    parser.add_argument("--beliefs", type=int, default=10_000, help="random beliefs (geometries)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the random beliefs")
+    parser.add_argument("--beliefs", type=cli.positive_int, default=10_000, help="random beliefs")
+    parser.add_argument("--seed", type=cli.nonnegative_int, default=0, help="seed of the random beliefs")
     parser.add_argument(
         "--out", type=Path, default=None, help="also write the report to this file (default: print only)"
     )
-    args = parser.parse_args(argv)
-    if args.beliefs < 1:
-        parser.error(f"--beliefs must be >= 1, got {args.beliefs}")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> dict[str, tuple[float, float, int]]:
+    args = build_parser().parse_args(argv)
     cases = random_beliefs(np.random.default_rng(args.seed), args.beliefs)
     ref = references(cases)
     lines = [
