@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from agents.base import as_batch
+from agents.policy_net import LIBM, PolicyNet
 from risk_env import observation as layout
 from risk_env.dynamics import unicycle_step
-from risk_env.ops import NUMPY
 from risk_env.parts import Uncertainty
 from risk_env.scenario import Scenario
 
@@ -64,12 +64,13 @@ def features(obs: np.ndarray) -> np.ndarray:
     x, y, theta = o[:, layout.EGO_POSE].T
     v, omega = o[:, layout.EGO_INPUT].T
     ox, oy, otheta, ov = first_object(o)
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = LIBM.cos(theta), LIBM.sin(theta)
     dx, dy = ox - x, oy - y
     rel_heading = otheta - theta
+    rel_c, rel_s = LIBM.cos(rel_heading), LIBM.sin(rel_heading)
     # the object's velocity relative to the ego's, in the ego's frame
-    vx = ov * np.cos(rel_heading) - v
-    vy = ov * np.sin(rel_heading)
+    vx = ov * rel_c - v
+    vy = ov * rel_s
     raw = np.stack(
         (
             *(o[:, layout.PATH_ERROR].T),
@@ -77,11 +78,11 @@ def features(obs: np.ndarray) -> np.ndarray:
             omega,
             c * dx + s * dy,
             -s * dx + c * dy,
-            np.cos(rel_heading),
-            np.sin(rel_heading),
+            rel_c,
+            rel_s,
             vx,
             vy,
-            np.hypot(dx, dy),
+            LIBM.hypot(dx, dy),
             o[:, layout.PROGRESS],
         ),
         axis=-1,
@@ -177,12 +178,12 @@ class FeatureSpec:
         (c1, c2, theta, v, omega) in the ego's frame and the box's half extents along the ego's
         axes (the c1/c2 box rotated into the ego's frame)."""
         x, y, theta = o[:, layout.EGO_POSE].T
-        c, s = np.cos(theta), np.sin(theta)
+        c, s = LIBM.cos(theta), LIBM.sin(theta)
         ox, oy, oth, ov, ow = measured.T
         out, n_prev = [], 0
         for n in self.steps:
             for _ in range(n - n_prev):
-                ox, oy, oth = unicycle_step(ox, oy, oth, ov, ow, self.dt, NUMPY)
+                ox, oy, oth = unicycle_step(ox, oy, oth, ov, ow, self.dt, LIBM)
             n_prev = n
             hx, hy = ctx[:, 4] + n * ctx[:, 2], ctx[:, 5] + n * ctx[:, 3]
             dx, dy = ox - x, oy - y
@@ -210,21 +211,22 @@ def slot_features(obs: np.ndarray) -> np.ndarray:
     o = np.atleast_2d(np.asarray(obs, dtype=float))
     x, y, theta = o[:, layout.EGO_POSE].T
     v, omega = o[:, layout.EGO_INPUT].T
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = LIBM.cos(theta), LIBM.sin(theta)
     ego = np.stack((*(o[:, layout.PATH_ERROR].T), v, omega, o[:, layout.PROGRESS]), axis=-1)
     parts = [ego / _SCALE[[0, 1, 2, 3, 4, 5, 13]]]
     for row in np.moveaxis(slot_table(o), 1, 0):  # (B, 6) per slot
         flag, ox, oy, otheta, ov = row[:, :5].T
         dx, dy, rel = ox - x, oy - y, otheta - theta
+        rel_c, rel_s = LIBM.cos(rel), LIBM.sin(rel)
         raw = np.stack(
             (
                 c * dx + s * dy,
                 -s * dx + c * dy,
-                np.cos(rel),
-                np.sin(rel),
-                ov * np.cos(rel) - v,
-                ov * np.sin(rel),
-                np.hypot(dx, dy),
+                rel_c,
+                rel_s,
+                ov * rel_c - v,
+                ov * rel_s,
+                LIBM.hypot(dx, dy),
             ),
             axis=-1,
         )
@@ -292,6 +294,9 @@ class PPOAgent:
         context: Context | None = None,
     ) -> None:
         self.model = model
+        """The SB3 PPO model (torch): samples the non-deterministic actions."""
+        self.policy = PolicyNet.from_sb3(model.policy)
+        """The deterministic action in float64 from the model's weights, the same on every CPU."""
         self.limits = limits
         self.spec = spec
         """The conditioned features the policy sees; None: the 14 of :func:`features` alone."""
@@ -362,7 +367,9 @@ class PPOAgent:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, None]:
-        """Inputs for ``observation (10 + 6 K,)`` or ``(B, 10 + 6 K)``; raises on a wrong shape or a NaN."""
+        """Inputs for ``observation (10 + 6 K,)`` or ``(B, 10 + 6 K)``; raises on a wrong shape or a NaN.
+        ``deterministic``: the policy's mean action, evaluated in float64 (:class:`PolicyNet`) so
+        that it is the same on every CPU; otherwise an action sampled by SB3 (torch)."""
         length = np.shape(observation)[-1] if np.ndim(observation) else 0
         size = layout.size(layout.slot_count(length)) if length > layout.SIZE else layout.SIZE
         obs, single = as_batch(observation, size)
@@ -372,6 +379,9 @@ class PPOAgent:
             seen = features(obs)
         else:
             seen = self.spec(obs, self.context.array())
-        action, _ = self.model.predict(seen, deterministic=deterministic)
+        if deterministic:
+            action = np.clip(self.policy(seen), -1.0, 1.0)  # as SB3 clips to the action space
+        else:
+            action, _ = self.model.predict(seen, deterministic=False)
         inputs = to_inputs(action, obs[:, layout.EGO_INPUT], self.limits)
         return (inputs[0] if single else inputs), None
