@@ -42,6 +42,7 @@ from agents.solver import (
     call_solver,
 )
 from agents.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step
+from risk_env import checks
 from risk_env import observation as ob
 from risk_env.ops import NUMPY
 from risk_env.path import point
@@ -170,12 +171,18 @@ class PathFollowingMPC:
     ) -> None:
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env Scenario, got {type(scenario).__name__}")
-        if not (isinstance(backoff, (int, float)) and backoff >= 0):
-            raise ValueError(f"backoff must be >= 0, got {backoff!r}")
-        if isinstance(cold_starts, bool) or not isinstance(cold_starts, int) or cold_starts < 1:
-            raise ValueError(f"cold_starts must be an integer >= 1, got {cold_starts!r}")
-        cap = RT_SHARE * scenario.dt if max_solve_time is None else max_solve_time
-        if isinstance(cap, bool) or not isinstance(cap, (int, float)) or not cap > 0:
+        # numbers of any real type (numpy's too); bools, strings and None name the argument
+        backoff = checks.positive("backoff", backoff, strict=False)
+        cold_starts = checks.integer("cold_starts", cold_starts, minimum=1)
+        jit_opt = checks.integer("jit_opt", jit_opt, minimum=0)
+        if seed is not None:
+            seed = checks.integer("seed", seed, minimum=0)
+        cap = (
+            RT_SHARE * scenario.dt
+            if max_solve_time is None
+            else checks.real("max_solve_time", max_solve_time)
+        )
+        if not cap > 0:
             raise ValueError(f"max_solve_time must be a time > 0 [s] (or None), got {max_solve_time!r}")
         self.max_solve_time = float(cap)
         """The wall-time cap of one step [s]."""
@@ -193,7 +200,7 @@ class PathFollowingMPC:
             solver=solver,
             stage_cost=stage_cost,
             jit=bool(jit),
-            jit_opt=int(jit_opt),
+            jit_opt=jit_opt,
             jit_cache=jit_cache,
             tol=tol,
             max_iter=max_iter,
@@ -232,12 +239,15 @@ class PathFollowingMPC:
 
     @risk_tolerance.setter
     def risk_tolerance(self, value: float) -> None:
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"risk_tolerance must be a number >= 0, got {value!r}") from None
+        value = checks.real("risk_tolerance", value)
         if not math.isfinite(value) or value < 0:
             raise ValueError(f"risk_tolerance must be a finite number >= 0, got {value!r}")
+        severity = self.estimator.severity
+        if value > severity.upper_bound:
+            raise ValueError(
+                f"risk_tolerance {value:g} exceeds {severity.upper_bound:g}, the largest per-step risk of"
+                f" the {severity.name!r} severity [{severity.unit}]: give it in that severity's own unit"
+            )
         self._epsilon = value
 
     @property

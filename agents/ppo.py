@@ -18,7 +18,6 @@ Needs the ``rl`` extra (``pip install "riskcrossing[rl]"``: torch CPU and stable
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +27,8 @@ import numpy as np
 
 from agents.base import as_batch
 from agents.policy_net import LIBM, PolicyNet
+from agents.ppo_metadata import build, read_metadata
+from risk_env import checks
 from risk_env import observation as layout
 from risk_env.dynamics import unicycle_step
 from risk_env.parts import Uncertainty
@@ -134,6 +135,14 @@ class FeatureSpec:
     """Prediction steps n whose mean and box the policy sees."""
     slots: int = 1
     """K, the observation's object slots the policy is trained for (1: the first present object)."""
+
+    def __post_init__(self) -> None:
+        checks.flag("prediction", self.prediction)
+        object.__setattr__(self, "dt", checks.positive("dt", self.dt))
+        if not isinstance(self.steps, tuple) or not self.steps:
+            raise TypeError(f"steps must be a non-empty tuple of integers, got {checks.describe(self.steps)}")
+        object.__setattr__(self, "steps", tuple(checks.integer("steps", n, minimum=1) for n in self.steps))
+        object.__setattr__(self, "slots", checks.integer("slots", self.slots, minimum=1))
 
     @property
     def size(self) -> int:
@@ -318,6 +327,11 @@ class PPOAgent:
         """
         from stable_baselines3 import PPO
 
+        if scenario is not None and not isinstance(scenario, Scenario):
+            raise TypeError(
+                "scenario must be a risk_env Scenario (e.g. Scenario.preset('medium') or"
+                f" env.unwrapped.scenario) or None, got {checks.describe(scenario)}"
+            )
         path = Path(path)
         zip_path = path if path.suffix == ".zip" else path.with_suffix(".zip")
         if not zip_path.is_file():
@@ -325,23 +339,18 @@ class PPOAgent:
                 f"no PPO model at {zip_path}; train one with python -m benchmarks.train_ppo"
             )
         meta_path = zip_path.with_suffix(METADATA_SUFFIX)
-        metadata = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        metadata = read_metadata(meta_path)
         if scenario is not None:
             limits = InputLimits.of(scenario, bool(metadata.get("args", {}).get("forward_only", False)))
         elif "limits" in metadata:
-            limits = InputLimits(**metadata["limits"])
+            limits = build(meta_path, "limits", InputLimits, metadata["limits"])
         else:
             raise ValueError(f"{meta_path} is missing: pass scenario= to set the input limits")
-        spec = (
-            FeatureSpec(**{**metadata["feature_spec"], "steps": tuple(metadata["feature_spec"]["steps"])})
-            if "feature_spec" in metadata
-            else None
-        )
+        fields = metadata.get("feature_spec")
+        spec = None if fields is None else build(meta_path, "feature_spec", FeatureSpec, fields)
         expected = FEATURES if spec is None else spec.size
-        if metadata.get("features", FEATURES) != expected:
-            raise ValueError(
-                f"{zip_path} was trained on {metadata['features']} features; this version has {expected}"
-            )
+        if (trained_on := metadata.get("features", FEATURES)) != expected:
+            raise ValueError(f"{zip_path} was trained on {trained_on} features; this version has {expected}")
         context = None
         if spec is not None:
             trained = metadata.get("args", {}).get("severity", "paper")
