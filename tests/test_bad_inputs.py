@@ -31,17 +31,21 @@ def test_an_injury_tolerance_in_joules_is_named_everywhere() -> None:
         Scenario.preset("low", severity="injury", risk_tolerance=1000)
     with pytest.raises(ValueError, match=WRONG_UNIT):
         gym.make("RiskCrossing-v0", severity="injury", risk_tolerance=1000)
-    injury = Scenario.preset("low", severity="injury")
+    injury = Scenario.preset("low", severity="injury", horizon=3)
     for agent in (SMPC, RMPC):
         with pytest.raises(ValueError, match=WRONG_UNIT):
             agent(injury, risk_tolerance=1000)
+    smpc = SMPC(injury)  # epsilon = 0: a quick build; epsilon is a parameter of its solver
+    with pytest.raises(ValueError, match=WRONG_UNIT):
+        smpc.risk_tolerance = 1000
+    smpc.risk_tolerance = np.float32(0.005)
+    assert smpc.risk_tolerance == pytest.approx(0.005)
     with pytest.raises(ValueError, match=WRONG_UNIT):
         SMPC.from_env(gym.make("RiskCrossing-v0", severity="injury"), risk_tolerance=1000.0)
     with pytest.raises(ValueError, match="risk_tolerance 1.5 exceeds 1, .* 'probability' severity"):
         Scenario.preset("low", severity="probability", risk_tolerance=1.5)
     # at the bound, and in J for the energy severities, any size passes
     assert Scenario.preset("low", severity="injury", risk_tolerance=2.0).risk_tolerance == 2.0
-    assert SMPC(injury, risk_tolerance=np.float32(0.005)).risk_tolerance == pytest.approx(0.005)
     assert Scenario.preset("low", severity="plastic", risk_tolerance=1e9).risk_tolerance == 1e9
 
 
@@ -141,7 +145,7 @@ def test_smpc_sample_counts_are_integers(name: str, value: object, error: type, 
 
 @pytest.mark.parametrize("name", ["risk_budget", "risk_weight"])
 def test_budget_and_weight_are_numbers_not_strings(name: str) -> None:
-    scenario = Scenario.preset("low", severity="probability")
+    scenario = Scenario.preset("low", severity="probability", horizon=2)
     with pytest.raises(TypeError, match=rf"{name} must be .* a finite number >= 0, got '5' \(str\)"):
         SMPC(scenario, **{name: "5"})
     assert getattr(SMPC(scenario, **{name: np.float32(0.5)}), name) == 0.5
@@ -158,8 +162,8 @@ def test_mpcs_take_numpy_scalars_wherever_they_take_python_numbers() -> None:
     agent = SMPC(
         scenario,
         risk="monte_carlo",
-        samples=np.int64(60),
-        pilot_samples=np.int32(20),
+        samples=np.int64(30),
+        pilot_samples=np.int32(10),
         bandwidth=np.float32(0.05),
         risk_tolerance=np.float64(400.0),
         risk_weight=np.float32(1.0),
@@ -173,7 +177,7 @@ def test_mpcs_take_numpy_scalars_wherever_they_take_python_numbers() -> None:
         soft_penalty=np.float32(1e4),
         object_slots=np.int64(1),
     )
-    assert agent.samples == 60 and agent.max_solve_time == pytest.approx(0.05)
+    assert agent.samples == 30 and agent.max_solve_time == pytest.approx(0.05)
     assert (agent.settings.max_iter, agent.cold_starts, agent.seed) == (80, 2, 4)
     assert type(agent.settings.max_iter) is int and type(agent.settings.tol) is float
     obs, _ = gym.make("RiskCrossing-v0", scenario=scenario).reset(seed=0)
