@@ -31,7 +31,7 @@ from agents.base import Policy
 from risk_env import ENV_ID, ESTIMATOR_NAMES, OBJECT_MOTIONS, RISK_TOLERANCES, RiskCrossingEnv, Scenario
 from risk_env import observation as ob
 from risk_env.path import point
-from risk_env.scenario import OVERRIDES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
+from risk_env.scenario import OVERRIDES, RISK_BOUNDS, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 from risk_env.transition import observe
 
 FUZZED: collections.Counter[str] = collections.Counter()
@@ -111,6 +111,9 @@ def scenarios(
         object_start = (ego_start[0] + draw(real(-15, 15)), ego_start[1] + draw(real(-15, 15)))
     else:
         object_start = (draw(real(-30, 80)), draw(real(-30, 30)))
+    severity = draw(st.sampled_from(SEVERITY_NAMES))
+    bound = RISK_BOUNDS[severity][0]  # a tolerance in the severity's own unit
+    joules = st.one_of(st.sampled_from(RISK_TOLERANCES), real(0.0, 3000.0))
     overrides: dict[str, Any] = {
         "curvature": curvature,
         "ego_start": ego_start,
@@ -119,8 +122,8 @@ def scenarios(
         "object_turn_rate": draw(real(-0.5, 0.5)),
         "v_ref": draw(real(0.0, 8.0)),
         "initial_input": (draw(real(-4.0, 8.0)), draw(real(-0.8, 0.8))),
-        "risk_tolerance": draw(st.one_of(st.sampled_from(RISK_TOLERANCES), real(0.0, 3000.0))),
-        "severity": draw(st.sampled_from(SEVERITY_NAMES)),
+        "risk_tolerance": draw(joules if math.isinf(bound) else st.one_of(st.just(0.0), real(0.0, bound))),
+        "severity": severity,
         "dt": draw(st.sampled_from((0.5, 0.5, 0.2, 1.0))),
         "max_steps": draw(integral(1, max_steps)),
         "mc_samples": draw(integral(1, 64)),
