@@ -146,9 +146,18 @@ def test_sb3_view_reports_episode_cost_and_terminal_observation() -> None:
         SB3VecEnv(gym.make_vec(risk_env.ENV_ID, num_envs=2))
 
 
-def _train(tmp_path: Path, *flags: str) -> dict:
+def _train(tmp_path: Path, *flags: str, steps: int = 1024) -> dict:
+    """Train in a subprocess for ``steps`` env steps (8 copies, rollouts of 64 steps each)."""
     out = tmp_path / "ppo"
-    command = [sys.executable, "-m", "benchmarks.train_ppo", "--out", str(out), "--total-timesteps", "1024"]
+    command = [
+        sys.executable,
+        "-m",
+        "benchmarks.train_ppo",
+        "--out",
+        str(out),
+        "--total-timesteps",
+        str(steps),
+    ]
     command += ["--num-envs", "8", "--n-steps", "64", "--batch-size", "256", "--no-progress-bar", *flags]
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -157,8 +166,11 @@ def _train(tmp_path: Path, *flags: str) -> dict:
 
 
 def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
-    meta = _train(tmp_path, "--checkpoint-every", "512")
+    """One short training (with the prediction features): saved, loaded, acting; told epsilon and
+    the level of the scenario it is loaded for, in the severity it was trained with."""
+    meta = _train(tmp_path, "--checkpoint-every", "512", "--prediction")
     assert meta["timesteps"] >= 1024 and meta["steps_per_s"] > 0
+    assert meta["features"] == FeatureSpec(prediction=True).size
     assert list((tmp_path / "ppo" / "model_checkpoints").glob("model_*_steps.zip"))
     agent = PPOAgent.load(tmp_path / "ppo" / "model.zip")
     assert agent.metadata["args"]["num_envs"] == 8
@@ -168,12 +180,30 @@ def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
     assert agent.predict(np.stack([obs] * 3))[0].shape == (3, 2)
     with pytest.raises(ValueError, match="non-finite"):
         agent.predict(np.full(observation.SIZE, np.nan))
+    env = gym.make(risk_env.ENV_ID, uncertainty="high", risk_tolerance=1500.0)
+    agent = PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=env.unwrapped.scenario)
+    assert agent.context == Context(1500.0, env.unwrapped.scenario.uncertainty)
+    assert agent.predict(env.reset(seed=0)[0])[0].shape == (2,)
+    other = gym.make(risk_env.ENV_ID, severity="probability", risk_tolerance=0.1)
+    with pytest.raises(ValueError, match="severity"):
+        PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
 
 
 def test_lagrangian_moves_beta_toward_the_cost_limit(tmp_path: Path) -> None:
-    up = _train(tmp_path / "up", "--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
+    """One rollout each (beta moves after every rollout)."""
+    up = _train(
+        tmp_path / "up",
+        "--lagrangian",
+        "--cost-limit",
+        "-1",
+        "--dual-lr",
+        "1",
+        "--risk-weight",
+        "2",
+        steps=512,
+    )
     assert up["final_rollout"]["beta"] > 2.0  # cost above the limit: the penalty grows
-    down = _train(tmp_path / "down", "--lagrangian", "--cost-limit", "1e9", "--risk-weight", "2")
+    down = _train(tmp_path / "down", "--lagrangian", "--cost-limit", "1e9", "--risk-weight", "2", steps=512)
     assert down["final_rollout"]["beta"] == 0.0  # far below the limit: the penalty vanishes
 
 
@@ -241,18 +271,6 @@ def test_policy_view_reward_terms_and_epsilon_per_episode() -> None:
             ended += 1
         lam = info["lambda"].copy()
     assert ended >= 6
-
-
-def test_agent_reads_epsilon_and_level_from_the_scenario(tmp_path: Path) -> None:
-    meta = _train(tmp_path, "--prediction")
-    assert meta["features"] == FeatureSpec(prediction=True).size
-    env = gym.make(risk_env.ENV_ID, uncertainty="high", risk_tolerance=1500.0)
-    agent = PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=env.unwrapped.scenario)
-    assert agent.context == Context(1500.0, env.unwrapped.scenario.uncertainty)
-    assert agent.predict(env.reset(seed=0)[0])[0].shape == (2,)
-    other = gym.make(risk_env.ENV_ID, severity="probability", risk_tolerance=0.1)
-    with pytest.raises(ValueError, match="severity"):
-        PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
 
 
 def test_seed_table_and_best_seed() -> None:
