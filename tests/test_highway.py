@@ -275,7 +275,7 @@ def test_adapter_turn_rate_and_speed_translation():
 def test_smpc_and_idm_in_intersection():
     env = make_intersection_env()
     uncapped = functools.partial(SMPC, risk="exact", max_solve_time=math.inf)  # a busy machine: no fallback
-    smpc = IntersectionAdapter(env, uncapped, risk_tolerance=500.0)
+    smpc = IntersectionAdapter(env, uncapped, risk_tolerance=500.0, slots=2)
     obs, _ = env.reset(seed=2)
     for _ in range(2):
         action, _ = smpc.predict(obs)
@@ -413,6 +413,8 @@ def test_highway_benchmarks_run_small(tmp_path):
             str(tmp_path),
             "--max-solve-time",
             "inf",
+            "--slots",
+            "1",  # the smallest MPC: the benchmark's plumbing is the point
         ]
     )
     assert [s["agent"] for s in summary] == ["rmpc", "idm"]

@@ -189,22 +189,16 @@ def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
         PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
 
 
-def test_lagrangian_moves_beta_toward_the_cost_limit(tmp_path: Path) -> None:
-    """One rollout each (beta moves after every rollout)."""
-    up = _train(
-        tmp_path / "up",
-        "--lagrangian",
-        "--cost-limit",
-        "-1",
-        "--dual-lr",
-        "1",
-        "--risk-weight",
-        "2",
-        steps=512,
-    )
-    assert up["final_rollout"]["beta"] > 2.0  # cost above the limit: the penalty grows
-    down = _train(tmp_path / "down", "--lagrangian", "--cost-limit", "1e9", "--risk-weight", "2", steps=512)
-    assert down["final_rollout"]["beta"] == 0.0  # far below the limit: the penalty vanishes
+def test_lagrangian_raises_beta_above_the_cost_limit(tmp_path: Path) -> None:
+    """One rollout (beta moves after every rollout): the cost is above the limit, the penalty grows."""
+    flags = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
+    assert _train(tmp_path, *flags, steps=512)["final_rollout"]["beta"] > 2.0
+
+
+@pytest.mark.slow
+def test_lagrangian_drops_beta_to_zero_far_below_the_cost_limit(tmp_path: Path) -> None:
+    flags = ("--lagrangian", "--cost-limit", "1e9", "--risk-weight", "2")
+    assert _train(tmp_path, *flags, steps=512)["final_rollout"]["beta"] == 0.0  # clipped at 0
 
 
 def test_load_errors(tmp_path: Path) -> None:
@@ -286,6 +280,7 @@ def test_seed_table_and_best_seed() -> None:
     assert "| mean ± std over 3 | 80.0 ± 10.0 | 0.3% ± 0.6% |" in table
 
 
+@pytest.mark.slow  # two trainings and their scoring; test_seed_table_and_best_seed is the fast test
 def test_seeds_train_score_and_ship_the_best(tmp_path: Path) -> None:
     out = tmp_path / "ppo"
     command = [sys.executable, "-m", "benchmarks.train_ppo", "--out", str(out), "--total-timesteps", "512"]

@@ -424,13 +424,7 @@ def check_agent_action(scenario: Scenario, action: np.ndarray, obs: np.ndarray) 
 AGENTS = {"RMPC": lambda s: RMPC(s), "SMPC": lambda s: SMPC(s, risk="exact")}
 
 
-@fuzz(14)
-@given(
-    name=st.sampled_from(sorted(AGENTS)),
-    scenario=scenarios(max_steps=6, horizon=3),
-    seed=st.integers(0, 2**16),
-)
-def test_agents_act_within_limits_in_closed_loop(name, scenario, seed):
+def agents_in_closed_loop(name: str, scenario: Scenario, seed: int) -> None:
     agent = AGENTS[name](scenario)
     assert isinstance(agent, Policy)
     env = RiskCrossingEnv(scenario=scenario, object_motion="sampled")
@@ -453,9 +447,7 @@ def agent_observations(draw: st.DrawFn) -> tuple[Scenario, list[np.ndarray]]:
     return scenario, draw(st.lists(observations(scenario), min_size=1, max_size=3))
 
 
-@fuzz(14)
-@given(name=st.sampled_from(sorted(AGENTS)), case=agent_observations())
-def test_agents_act_within_limits_on_fuzzed_observations(name, case):
+def agents_on_observations(name: str, case: tuple[Scenario, list[np.ndarray]]) -> None:
     scenario, batch = case
     agent = AGENTS[name](scenario)
     actions, _ = agent.predict(np.stack(batch), episode_start=np.ones(len(batch), dtype=bool))
@@ -465,3 +457,17 @@ def test_agents_act_within_limits_on_fuzzed_observations(name, case):
         check_agent_action(scenario, action, obs)
     single, _ = agent.predict(batch[0], episode_start=True)
     check_agent_action(scenario, single, batch[0])
+
+
+AGENT_NAMES = st.sampled_from(sorted(AGENTS))
+CLOSED_LOOPS = given(name=AGENT_NAMES, scenario=scenarios(max_steps=6, horizon=3), seed=st.integers(0, 2**16))
+test_agents_act_within_limits_in_closed_loop = fuzz(8)(CLOSED_LOOPS(agents_in_closed_loop))
+test_agents_act_within_limits_on_fuzzed_observations = fuzz(8)(
+    given(name=AGENT_NAMES, case=agent_observations())(agents_on_observations)
+)
+test_agents_act_within_limits_in_closed_loop_long = pytest.mark.slow(
+    fuzz(40)(CLOSED_LOOPS(agents_in_closed_loop))
+)
+test_agents_act_within_limits_on_fuzzed_observations_long = pytest.mark.slow(
+    fuzz(40)(given(name=AGENT_NAMES, case=agent_observations())(agents_on_observations))
+)
