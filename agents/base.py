@@ -89,7 +89,7 @@ class SolveReport:
     exceeds when other processes took the CPU."""
     overran_calls: int = 0
     """Solver calls that ran past their rung's iteration limit (fatrop may ignore ``max_iter``, see
-    :mod:`agents.budget`): the calls the time cap could not bound."""
+    :mod:`agents.mpc.nlp.budget`): the calls the time cap could not bound."""
     capped: bool = False
     """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
     rung's iteration or time limit) or left no time for one."""
@@ -141,3 +141,34 @@ def _slots_hint(obs: np.ndarray, size: int) -> str:
     except (ValueError, IndexError):
         return ""
     return f" (an observation with {found} object slot(s); this agent reads {wanted})"
+
+
+def predict_each(
+    observation: Any,
+    size: int,
+    episode_start: Any,
+    forget: Callable[[int], None],
+    step: Callable[[int, np.ndarray], Any],
+) -> tuple[np.ndarray, list[Any]]:
+    """SB3's ``predict`` for a policy that acts on one observation at a time: ``(actions, reports)``
+    with float32 actions ``(2,)`` for one observation ``(size,)`` or ``(B, 2)`` for a batch
+    ``(B, size)``. Entry i is ``step(i, obs_i)`` (a report with an ``action``); ``forget(i)`` first
+    where ``episode_start`` (a bool or ``(B,)``) says a new episode starts."""
+    obs, single = as_batch(observation, size)
+    starts = np.zeros(len(obs), dtype=bool)
+    if episode_start is not None:
+        flags = np.asarray(episode_start, dtype=bool).reshape(-1)
+        if flags.size not in (1, len(obs)):
+            raise ValueError(
+                f"episode_start must have 1 or {len(obs)} entries (one per observation), got {flags.size}"
+            )
+        starts |= np.broadcast_to(flags, (len(obs),))
+    actions = np.empty((len(obs), 2), dtype=np.float32)
+    reports = []
+    for i, o in enumerate(obs):
+        if starts[i]:
+            forget(i)
+        report = step(i, o)
+        actions[i] = report.action
+        reports.append(report)
+    return (actions[0] if single else actions), reports

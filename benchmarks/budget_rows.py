@@ -1,6 +1,6 @@
 """The episode-risk-budget rows of :mod:`benchmarks.sampled`: one row per (agent, severity,
 uncertainty, budget B), the agent an SMPC with ``risk_budget=B`` and no per-step bound
-(``risk_tolerance=math.inf``; :mod:`agents.risk_budget`).
+(``risk_tolerance=math.inf``; :mod:`agents.mpc.nlp.risk_budget`).
 
 Each row sets the episode's summed risk (``info["episode_risk"]``, mean and max over the episodes)
 against B, with the realised collision rate per episode (Wilson 95 % interval; with the

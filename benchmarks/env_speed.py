@@ -16,7 +16,7 @@ It prints two tables (and writes them to ``OUT/env_speed.txt``, ``env_speed_near
   object's one-step belief (Monte Carlo with the scenario's J = ``mc_samples``). ``exact, sampled``
   is the exact estimator with ``object_motion="sampled"``; ``(no risk)`` replaces the estimator by
   a stub, so it shows what the env costs around the risk; ``exact, 4 objects`` (and ``(no risk),
-  4 objects``) steps the ``"four_crossing"`` scene (:mod:`risk_env.scenes`), four objects with
+  4 objects``) steps the ``"four_crossing"`` scene (:mod:`risk_env.scenario.scenes`), four objects with
   four risk terms per step.
 
 Each repetition times every env in turn, so that a busy machine slows them alike; shown is the best
@@ -36,7 +36,7 @@ import numpy as np
 
 from benchmarks import cli
 from risk_env import ENV_ID, ESTIMATOR_NAMES, Scenario, make_estimator, predict
-from risk_env.risk import signed_box_distance
+from risk_env.risk.estimators import signed_box_distance
 
 REFERENCES = ("CartPole-v1", "Pendulum-v1")
 """Gymnasium's classic-control envs our step is measured against."""

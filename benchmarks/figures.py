@@ -20,8 +20,8 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
-from risk_env import path as ref_path  # noqa: E402
-from risk_env.scenario import Scenario  # noqa: E402
+from risk_env.models import path as ref_path  # noqa: E402
+from risk_env.scenario.scenario import Scenario  # noqa: E402
 
 STYLES = {
     "low": {"color": "tab:green", "ls": "-", "marker": "o", "cross": 13},

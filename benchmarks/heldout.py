@@ -5,7 +5,7 @@ in crossings they were not tuned on?
     python -m benchmarks.heldout --scenes 60 --workers 1 --out docs/results/heldout
 
 The agents were developed on the paper's scene and the ``two_crossing`` preset
-(:mod:`risk_env.scenes`); these scenes come from a seeded generator (:func:`make_scenes`,
+(:mod:`risk_env.scenario.scenes`); these scenes come from a seeded generator (:func:`make_scenes`,
 reproducible from ``(seed, index)``, a prefix of a larger run is the smaller run) that draws, per
 scene:
 
@@ -43,8 +43,8 @@ import numpy as np
 from benchmarks import cli
 from benchmarks.sampled import wilson
 from benchmarks.sweep import run_sweep
-from risk_env.path import point
-from risk_env.scenario import Scenario
+from risk_env.models.path import point
+from risk_env.scenario.scenario import Scenario
 
 LEVELS: tuple[str, ...] = ("low", "medium", "high")
 MOTIONS: tuple[str, ...] = ("paper", "sampled")

@@ -48,8 +48,8 @@ import numpy as np
 from benchmarks import cli
 from benchmarks.sampled import wilson
 from benchmarks.sweep import run_sweep
-from risk_env.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
-from risk_env.severity import check_tolerance
+from risk_env.risk.severity import check_tolerance
+from risk_env.scenario.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 AGENTS = ("rmpc", "smpc", "idm")
 LABELS = {"rmpc": "RMPC (worst case)", "smpc": "SMPC (exact)", "idm": "highway-env IDM"}

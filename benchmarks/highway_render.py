@@ -109,7 +109,7 @@ def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], in
     from risk_env.highway import IntersectionAdapter, RiskCostWrapper, make_intersection_env
     from risk_env.highway.adapter import ADAPTER_DEFAULTS, reached
     from risk_env.highway.graphics import render_scene
-    from risk_env.prediction import predict
+    from risk_env.prediction.belief import predict
 
     radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
     env = RiskCostWrapper(

@@ -25,14 +25,14 @@ def evaluate(
     batch: int = 64,
 ) -> dict[str, float]:
     """Mean e_acc (sum_k ||e_k||, k = 0..steps), collision and goal rates, the PPO cost per episode
-    (:class:`agents.ppo_env.RewardWeights` with the policy's saved weights) and d_min [m] of
+    (:class:`agents.ppo.training.RewardWeights` with the policy's saved weights) and d_min [m] of
     ``episodes`` deterministic episodes of the policy at ``path`` (in the scene it was trained on)."""
     import json
 
     import gymnasium as gym
 
     import risk_env
-    from agents.ppo import PPOAgent
+    from agents.ppo.policy import PPOAgent
 
     train = json.loads(Path(path).with_suffix(".json").read_text()).get("args", {})
     scale, collision_cost = float(train.get("cost_scale", 1000.0)), float(train.get("collision_cost", 1.0))

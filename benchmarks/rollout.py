@@ -22,7 +22,7 @@ AGENTS: dict[str, tuple[str, str]] = {
 """Benchmark names -> (method, variant): the risk estimator of an MPC, the training of a PPO policy."""
 
 SCENE_AGENTS: dict[str, str] = {"ppo:lagrangian_two_crossing": "two_crossing"}
-"""Agents that see every object slot of one scene (risk_env.scenes) and run there only: the PPO
+"""Agents that see every object slot of one scene (risk_env.scenario.scenes) and run there only: the PPO
 policy trained with ``--scene two_crossing`` (its observation has that scene's slot count)."""
 
 
@@ -40,7 +40,7 @@ def available_agents(scene: str = "paper") -> list[str]:
 def build_agent(method: str, variant: str, env: gym.Env, seed: int = 0, **options: Any) -> Any:
     """The agent ``(method, variant)`` of :data:`AGENTS` for ``env``'s scenario and tolerance."""
     if method == "PPO":
-        from agents.ppo import PPOAgent, shipped_model
+        from agents.ppo.policy import PPOAgent, shipped_model
 
         return PPOAgent.load(shipped_model(variant), scenario=env.unwrapped.scenario)
     from agents import RMPC, SMPC

@@ -44,7 +44,7 @@ from benchmarks import cli
 from benchmarks.budget_rows import BUDGET_COLUMNS, markdown_budget, summarise_budget
 from benchmarks.rollout import AGENTS, available_agents, build_agent, rollout
 from benchmarks.sweep import run_sweep
-from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
+from risk_env.scenario.scenario import SCENE_NAMES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 COLUMNS = (
     "agent",
@@ -108,8 +108,8 @@ def run_job(job: Job) -> list[dict[str, Any]]:
     import gymnasium as gym
 
     import risk_env  # noqa: F401
-    from risk_env.ops import NUMPY
-    from risk_env.severity import make_severity
+    from risk_env.models.ops import NUMPY
+    from risk_env.risk.severity import make_severity
 
     env = gym.make(
         "RiskCrossing-v0",
@@ -165,8 +165,8 @@ def _sig(x: float, digits: int = 4) -> float:
 
 
 def summarise(job: Job, episodes: list[dict[str, Any]]) -> dict[str, Any]:
-    from risk_env.scenario import Scenario
-    from risk_env.severity import make_severity
+    from risk_env.risk.severity import make_severity
+    from risk_env.scenario.scenario import Scenario
 
     n = len(episodes)
     collisions = sum(e["collision"] for e in episodes)
@@ -211,7 +211,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     lines = [
         "# Sampled object motion: does epsilon bound what happens?",
         "",
-        *([f"Scene {', '.join(scenes)} (risk_env.scenes).", ""] if scenes != ["paper"] else []),
+        *([f"Scene {', '.join(scenes)} (risk_env.scenario.scenes).", ""] if scenes != ["paper"] else []),
         "Risks, eps and harm in the severity's own unit (given with eps). Harm/step = mean realised",
         "I_C s per step; with calibrated risk it matches Risk mean (both are per-step expected harm).",
         "Episode risk = info['episode_risk'], the summed risk of an episode (mean and max over",
@@ -266,7 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scene",
         default="paper",
         choices=SCENE_NAMES,
-        help="which road users cross (risk_env.scenes; default: the paper's one object)",
+        help="which road users cross (risk_env.scenario.scenes; default: the paper's one object)",
     )
     p.add_argument(
         "--max-solve-time",
@@ -324,9 +324,9 @@ def parse_tolerances(
 
     A group ``"A,B"`` applies to every severity without a group of its own ``"NAME=A,B"``. Raises
     ``ValueError`` naming a value that is not a number, or not one of its severity's unit
-    (:func:`risk_env.severity.check_tolerance`), and a severity left without tolerances.
+    (:func:`risk_env.risk.severity.check_tolerance`), and a severity left without tolerances.
     """
-    from risk_env.severity import check_tolerance
+    from risk_env.risk.severity import check_tolerance
 
     common: list[float] | None = None
     own: dict[str, list[float]] = {}

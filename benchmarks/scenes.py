@@ -36,13 +36,13 @@ from typing import Any
 import numpy as np
 from gymnasium.utils import seeding
 
-from risk_env.dynamics import unicycle_step
-from risk_env.ops import NUMPY
-from risk_env.path import point
-from risk_env.prediction import predict
-from risk_env.risk import signed_box_distance
-from risk_env.scenario import Scenario, Uncertainty
-from risk_env.transition import move_object
+from risk_env.envs.transition import move_object
+from risk_env.models.dynamics import unicycle_step
+from risk_env.models.ops import NUMPY
+from risk_env.models.path import point
+from risk_env.prediction.belief import predict
+from risk_env.risk.estimators import signed_box_distance
+from risk_env.scenario.scenario import Scenario, Uncertainty
 
 LEVELS: tuple[str, ...] = ("low", "medium", "high", "enlarged")
 KINDS: tuple[str, ...] = ("close", "crossing", "never")
@@ -141,7 +141,7 @@ def _scene(index: int, rng: np.random.Generator, seed: int) -> Scene:
 
 def object_truth(scene: Scene, steps: int | None = None) -> np.ndarray:
     """The object's true positions ``(steps+1, 2)`` [m] at k = 0..steps (default ``max_steps``):
-    the env's transition replayed from the scene's seed (:mod:`risk_env.transition`)."""
+    the env's transition replayed from the scene's seed (:mod:`risk_env.envs.transition`)."""
     sc = scene.scenario()
     steps = sc.max_steps if steps is None else steps
     rng, _ = seeding.np_random(scene.seed)

@@ -228,7 +228,7 @@ def markdown(
         "share of all steps: a fallback must act there; not certified: the fallback steps not",
         "certified infeasible (the certificate is sufficient only, so an upper bound on the fallbacks",
         "where a plan may have existed). Overran: solver calls that ran past their iteration limit",
-        "(fatrop ignores it at times; see `agents/budget.py`); > cap: steps longer than the cap",
+        "(fatrop ignores it at times; see `agents/mpc/nlp/budget.py`); > cap: steps longer than the cap",
         "`max_solve_time`. Capped: steps where the time cap cut a call",
         "short or left no time for one. Step time: the whole `predict` call [ms] (wall time; CPU max: the",
         "process's CPU time in the step, its own work, which the wall time exceeds when other processes",

@@ -29,7 +29,7 @@ from benchmarks.paper_table2 import PAPER, TOLERANCES
 from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_agent, rollout
 from benchmarks.summary import summary
 from benchmarks.sweep import run_sweep
-from risk_env.scenario import SCENE_NAMES, SEVERITY_NAMES, Scenario
+from risk_env.scenario.scenario import SCENE_NAMES, SEVERITY_NAMES, Scenario
 
 METHODS = AGENTS
 LEVELS = ("low", "medium", "high")
@@ -246,7 +246,10 @@ def markdown(
 ) -> str:
     lines = ["# Table II: ours beside the paper's", ""]
     if scene != "paper":
-        lines += [f"Scene `{scene}` (risk_env.scenes): the paper's figures are for its one-object scene.", ""]
+        lines += [
+            f"Scene `{scene}` (risk_env.scenario.scenes): the paper's figures are for its one-object scene.",
+            "",
+        ]
     lines.append("Each cell: ours (paper). e_acc = sum of ||e_k||; d_min [m]. `*` marks a collision.")
     units = sorted({_unit(r.get("severity", "paper")) for r in rows})
     lines.append(f"eps in the severity's unit: {', '.join(units)}.")
@@ -302,7 +305,7 @@ def markdown(
 
 def _unit(severity: str) -> str:
     """The unit of the severity named ``severity`` (J, probability, injuries)."""
-    from risk_env.severity import make_severity
+    from risk_env.risk.severity import make_severity
 
     return make_severity(Scenario(severity=severity)).unit
 
@@ -352,7 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scene",
         default="paper",
         choices=SCENE_NAMES,
-        help="which road users cross (risk_env.scenes; default: the paper's one object)",
+        help="which road users cross (risk_env.scenario.scenes; default: the paper's one object)",
     )
     cli.add_sweep_options(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -381,7 +384,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         p.error(f"--tolerances must be numbers, got {args.tolerances!r}")
     if any(t < 0 for t in args.tolerances):
         p.error("--tolerances must be >= 0")
-    from risk_env.severity import check_tolerance
+    from risk_env.risk.severity import check_tolerance
 
     try:
         for t in args.tolerances:

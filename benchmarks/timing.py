@@ -15,7 +15,8 @@ configuration e_acc, d_min and the steps taken. Targets on the project's 2-core 
 p95): RMPC and exact SMPC 5 / 15 ms, Monte Carlo SMPC (J = 500) 40 / 80 ms, no fallback.
 
 ``--jit`` runs the solvers on compiled code (generated C, ``$CC`` at ``-O1``; see
-:mod:`agents.solver`): about 40 s for the exact SMPC's three solvers, shared by every uncertainty level
+:mod:`agents.mpc.nlp.solver`): about 40 s for the exact SMPC's three solvers, shared by every
+uncertainty level
 and tolerance, paid once per machine (the libraries are kept in ``$RISKMPC_JIT_CACHE``, default
 ``~/.cache/riskcrossing/jit``); the "build" time printed is what this run spent building and
 compiling. The Monte Carlo SMPC's code (500 draws per step) would take many minutes to compile and

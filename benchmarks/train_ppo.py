@@ -7,13 +7,14 @@
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
 The copies are split over the uncertainty levels and draw epsilon per episode; the policy is
-told both (:class:`agents.ppo.FeatureSpec`). Reward per step (:class:`agents.ppo_env.RewardWeights`):
+told both (:class:`agents.ppo.policy.FeatureSpec`). Reward per step
+(:class:`agents.ppo.training.RewardWeights`):
 ``-w_e ||e_{k+1}|| + w_p (lambda_{k+1} - lambda_k) + w_g [goal] - beta c_k``, with the cost
 ``c_k = max(0, R_{k+1|k} - epsilon) / cost_scale + collision_cost [collision]``. ``--lagrangian``
 adapts beta after every rollout by dual ascent, ``beta <- max(0, beta + dual_lr (mean episode
 cost - cost_limit))``. Writes ``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits,
 features, wall time and training throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's
-CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.PPOAgent.load` reads the model back. ``--seeds N``
+CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.policy.PPOAgent.load` reads the model back. ``--seeds N``
 trains N seeds, scores them and ships the best (:func:`train_seeds`).
 """
 
@@ -33,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from risk_env.scenes import SCENE_NAMES, scene_objects
+from risk_env.scenario.scenes import SCENE_NAMES, scene_objects
 
 
 @dataclass
@@ -61,7 +62,7 @@ class Args:
     tolerances: str = "0,500,1000,1500,2000,2500"
     """Comma list of epsilon [the severity's unit], one drawn per episode (the paper's Table II)."""
     conditioned: bool = True
-    """Show the policy epsilon and the uncertainty (agents.ppo.FeatureSpec)."""
+    """Show the policy epsilon and the uncertainty (agents.ppo.policy.FeatureSpec)."""
     prediction: bool = True
     """Also show the object's predicted means and truncation boxes over the horizon."""
     forward_only: bool = True
@@ -72,8 +73,8 @@ class Args:
     object_motion: str = "sampled"
     """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
     scene: str = "paper"
-    """Which road users cross (risk_env.scenes): the policy sees every one of the scene's object
-    slots (agents.ppo.FeatureSpec ``slots``; one slot: the paper's features)."""
+    """Which road users cross (risk_env.scenario.scenes): the policy sees every one of the scene's object
+    slots (agents.ppo.policy.FeatureSpec ``slots``; one slot: the paper's features)."""
     randomize: bool = False
     """Train on seeded variations of the scenario (curvature, starts, object speed); off: the
     paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
@@ -96,7 +97,7 @@ class Args:
     """Adapt beta by dual ascent toward cost_limit."""
     cost_limit: float = 0.02
     """Per-episode cost the Lagrangian aims at: the mean over the rollout's finished episodes of
-    sum_k c_k (agents.ppo_env.RewardWeights: a collision counts collision_cost)."""
+    sum_k c_k (agents.ppo.training.RewardWeights: a collision counts collision_cost)."""
     dual_lr: float = 5.0
     """Step size of the dual ascent on beta [beta per unit of episode cost]."""
     n_steps: int = 128
@@ -193,9 +194,9 @@ def tolerances(args: Args) -> list[float]:
 
 
 def feature_spec(args: Args, dt: float) -> Any:
-    """The :class:`agents.ppo.FeatureSpec` of the run (None: unconditioned, 14 features), with
+    """The :class:`agents.ppo.policy.FeatureSpec` of the run (None: unconditioned, 14 features), with
     one slot per object of ``--scene``."""
-    from agents.ppo import FeatureSpec
+    from agents.ppo.policy import FeatureSpec
 
     if not args.conditioned:
         if args.scene != "paper":
@@ -220,8 +221,8 @@ def make_env(args: Args) -> Any:
     (episode return, length, cost, collision, success) -> VecNormalize (rewards only)."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from agents.ppo import InputLimits
-    from agents.ppo_env import LevelMix, PolicyView, RewardWeights, SB3VecEnv
+    from agents.ppo.policy import InputLimits
+    from agents.ppo.training import LevelMix, PolicyView, RewardWeights, SB3VecEnv
 
     env = LevelMix(
         args.num_envs,
@@ -312,7 +313,7 @@ def train(args: Args) -> dict[str, Any]:
     from stable_baselines3 import PPO
     from stable_baselines3.common.logger import configure
 
-    from agents.ppo import FEATURES, InputLimits
+    from agents.ppo.policy import FEATURES, InputLimits
 
     torch.set_num_threads(1)  # small networks: threads cost more than they give on 2 cores
     args.out.mkdir(parents=True, exist_ok=True)

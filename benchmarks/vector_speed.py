@@ -12,13 +12,13 @@ motion by default. Per row: the batch step [us], env steps/s, us per env step an
 multiple of one ``gym.make("CartPole-v1")`` and ``gym.make("Pendulum-v1")`` step (seeded random
 actions). Each round runs every row (and the references) once, so that a busy spell of a shared
 machine slows them alike; shown is each row's best round. Modes: ``vector_entry_point`` (our
-batched env; up to :data:`~risk_env.vector_env.SCALAR_COPIES` copies it steps them one by one in
+batched env; up to :data:`~risk_env.envs.vector_env.SCALAR_COPIES` copies it steps them one by one in
 Python floats), ``numpy`` (the same env held to its numpy path, shown up to 64 copies), Gymnasium's
 ``sync`` and ``async`` vector envs of single envs (up to ``--max-wrapped`` copies), and
 ``CartPole-v1`` (Gymnasium's own batched CartPole, for scale). The summary gives the fixed cost
 (a batch step of 1 copy) and the cost per copy (from the smallest and largest batch).
 ``--objects``: the scenes timed by their number of objects (1: the paper's, 2: ``"two_crossing"``,
-4: ``"four_crossing"``; :mod:`risk_env.scenes`); the targets are for one object.
+4: ``"four_crossing"``; :mod:`risk_env.scenario.scenes`); the targets are for one object.
 """
 
 from __future__ import annotations
@@ -34,8 +34,8 @@ import numpy as np
 import risk_env
 from benchmarks import cli
 from benchmarks.env_speed import REFERENCES, step_times, stepper
-from risk_env.scenario import Scenario
-from risk_env.scenes import SCENE_NAMES
+from risk_env.scenario.scenario import Scenario
+from risk_env.scenario.scenes import SCENE_NAMES
 
 MODES = ("vector_entry_point", "numpy", "sync", "async", "CartPole-v1")
 TARGETS = ((64, 100_000), (1024, 500_000))

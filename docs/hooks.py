@@ -4,7 +4,8 @@ A page asks for one with an HTML comment on a line of its own; :func:`on_page_ma
 
 - ``<!-- scenario-fields -->``: every field of :class:`risk_env.Scenario`, by its flat override
   name, with its default and the docstring under it;
-- ``<!-- uncertainty-presets -->``: the paper's Table I, from :meth:`risk_env.scenario.Uncertainty.preset`;
+- ``<!-- uncertainty-presets -->``: the paper's Table I, from
+:meth:`risk_env.scenario.scenario.Uncertainty.preset`;
 - ``<!-- public-names PACKAGE -->``: every name of ``PACKAGE.__all__``, linked to its documentation;
 - ``<!-- cli-help NAME -->``: the ``--help`` of ``python -m benchmarks.NAME``;
 - ``<!-- ppo-training -->``: the shipped PPO policies' training record (``agents/models/*.json``);
@@ -64,7 +65,7 @@ def _default(value: Any) -> str:
 
 def scenario_fields() -> str:
     """Markdown table of every Scenario field: flat name, field, default, meaning."""
-    from risk_env.scenario import OVERRIDES, Scenario
+    from risk_env.scenario.scenario import OVERRIDES, Scenario
 
     flat = {(part, attr): name for name, (part, attr) in OVERRIDES.items()}
     default = Scenario()
@@ -102,7 +103,7 @@ def scenario_fields() -> str:
 
 def uncertainty_presets() -> str:
     """The paper's Table I as the presets build it."""
-    from risk_env.scenario import UNCERTAINTY_PRESETS, Uncertainty
+    from risk_env.scenario.scenario import UNCERTAINTY_PRESETS, Uncertainty
 
     rows = [
         "| level | Q: sigma growth per step (c1 [m], c2 [m], v [m/s])"

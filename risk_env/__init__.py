@@ -7,10 +7,10 @@ its batched numpy form as the ``vector_entry_point`` of ``gym.make_vec``.
 
 import gymnasium as _gym
 
-from risk_env.env import ENV_ID, OBJECT_MOTIONS, RiskCrossingEnv
-from risk_env.parts import CrossingObject
-from risk_env.prediction import Belief, predict, predict_array
-from risk_env.risk import (
+from risk_env.envs.env import ENV_ID, OBJECT_MOTIONS, RiskCrossingEnv
+from risk_env.envs.variations import Variations
+from risk_env.prediction.belief import Belief, predict, predict_array
+from risk_env.risk.estimators import (
     ESTIMATOR_NAMES,
     ExactRisk,
     MonteCarloRisk,
@@ -18,11 +18,11 @@ from risk_env.risk import (
     WorstCaseRisk,
     make_estimator,
 )
-from risk_env.scenario import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
-from risk_env.scenes import SCENE_NAMES
-from risk_env.severity import Severity, make_severity
-from risk_env.total_risk import make_estimators
-from risk_env.variations import Variations
+from risk_env.risk.severity import Severity, make_severity
+from risk_env.risk.total_risk import make_estimators
+from risk_env.scenario.parts import CrossingObject
+from risk_env.scenario.scenario import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
+from risk_env.scenario.scenes import SCENE_NAMES
 
 __all__ = [
     "ENV_ID",
@@ -51,6 +51,6 @@ __all__ = [
 if ENV_ID not in _gym.registry:
     _gym.register(
         id=ENV_ID,
-        entry_point="risk_env.env:RiskCrossingEnv",
-        vector_entry_point="risk_env.vector_env:RiskCrossingVectorEnv",
+        entry_point="risk_env.envs.env:RiskCrossingEnv",
+        vector_entry_point="risk_env.envs.vector_env:RiskCrossingVectorEnv",
     )

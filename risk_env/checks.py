@@ -88,6 +88,17 @@ def positive(name: str, value: Any, strict: bool = True) -> float:
     return out
 
 
+def within_severity(name: str, value: float, severity: str, bound: float, unit: str) -> float:
+    """``value`` if it is at most ``bound``, the largest per-step risk of the severity named
+    ``severity`` [``unit``]; else ``ValueError`` naming it (a tolerance above it is in another unit)."""
+    if value > bound:
+        raise ValueError(
+            f"{name} {value:g} exceeds {bound:g}, the largest per-step risk of the {severity!r} severity"
+            f" [{unit}]: give it in that severity's own unit"
+        )
+    return value
+
+
 def finite_reals(name: str, value: Any, length: int) -> tuple[float, ...]:
     """:func:`reals`, each entry finite; errors name ``name[i]``."""
     out = reals(name, value, length)
@@ -172,7 +183,7 @@ def real_array(value: Any, name: str, expected: str) -> np.ndarray:
 
 def ego_action(action: Any, ego: Any) -> tuple[float, float]:
     """``action`` as ``(v, omega)`` floats if the env's action Box of ``ego`` (a
-    :class:`~risk_env.parts.Ego`) holds it (up to :func:`slack`); else ``ValueError`` naming it."""
+    :class:`~risk_env.scenario.parts.Ego`) holds it (up to :func:`slack`); else ``ValueError`` naming it."""
     a = real_array(action, "action", "2 numbers (v [m/s], omega [rad/s])")
     if a.shape != (2,):
         raise ValueError(
@@ -254,3 +265,39 @@ def episode_end(collision: bool, goal: bool, steps: int, max_steps: int) -> str:
     if goal:
         return f"terminated at the goal at step {steps}"
     return f"truncated at max_steps = {max_steps}"
+
+
+def batch_actions(actions: Any, copies: int) -> np.ndarray:
+    """``actions`` of a batched env as a new float array ``(copies, 2)``; raises ``ValueError`` on
+    a wrong shape or values that are not real numbers."""
+    expected = f"numbers of shape ({copies}, 2)"
+    a = np.array(real_array(actions, "actions", expected), dtype=float)  # a copy: changed later
+    if a.shape != (copies, 2):
+        raise ValueError(f"actions must have shape ({copies}, 2) = (v [m/s], omega [rad/s]), got {a.shape}")
+    return a
+
+
+def batch_actions_inside(
+    a: np.ndarray, low: np.ndarray, high: np.ndarray, ego: Any, active: np.ndarray | None
+) -> None:
+    """Raise ``ValueError`` naming the stepping copies (``active``; None: all) whose actions
+    ``a (B, 2)`` lie outside ``[low, high]`` (the Box, with its float32 slack) or are not finite;
+    ``ego``'s limits are named in the message."""
+    inside = (a >= low) & (a <= high)  # False for NaN
+    if inside.all():
+        return
+    bad_rows = ~inside.all(axis=1)
+    if active is not None:
+        bad_rows &= active
+    if not bad_rows.any():
+        return
+    non_finite = ~np.isfinite(a).all(axis=1)
+    for name, bad in (("non-finite", non_finite), ("outside the action space", ~non_finite)):
+        bad &= bad_rows
+        if bad.any():
+            rows = np.flatnonzero(bad)[:5].tolist()
+            raise ValueError(
+                f"actions of copies {rows} are {name}: {a[rows].tolist()} (bounds v in"
+                f" [{ego.v_min}, {ego.v_max}] m/s, |omega| <= {ego.omega_max} rad/s;"
+                " the env clips nothing)"
+            )

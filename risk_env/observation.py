@@ -28,10 +28,10 @@ positions, arc length and position errors, pi for the wrapped headings, :data:`R
 speeds, turn rates and the speed error, [0, 1] for the flags (:func:`bounds`). A Box derived from
 each scenario would change with it: saved policies (the PPO models) would no longer match, and
 randomised episodes and batched copies could not share one space. So the scenario guarantees the
-fit instead: :class:`~risk_env.scenario.Scenario` rejects, naming the fields, any scenario whose
+fit instead: :class:`~risk_env.scenario.scenario.Scenario` rejects, naming the fields, any scenario whose
 observations could leave the Box within ``max_steps`` steps, for any actions and with every
 object moving either way (``object_motion="paper"`` or ``"sampled"``); see
-:meth:`~risk_env.scenario.Scenario.observation_reach` for the worst cases. Stepping past an
+:meth:`~risk_env.scenario.scenario.Scenario.observation_reach` for the worst cases. Stepping past an
 episode's end raises, so no episode runs longer. (``randomize=True`` draws each episode's
 scenario through the same check: a draw that could leave the Box raises at ``reset``.)
 """
@@ -39,11 +39,11 @@ scenario through the same check: a draw that could leave the Box raises at ``res
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from risk_env.ops import NUMPY
+from risk_env.models.ops import NUMPY
 
 EGO_POSE = slice(0, 3)
 EGO_INPUT = slice(3, 5)
@@ -125,6 +125,13 @@ def bounds(slots: int = 1) -> tuple[np.ndarray, np.ndarray]:
         low[start + 3], high[start + 3] = -np.pi, np.pi  # the heading
         low[start + 4 : start + 6], high[start + 4 : start + 6] = -RATE_BOUND, RATE_BOUND
     return low, high
+
+
+def action_bounds(ego: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of the action Box, float32 ``(2,)`` each: ``(v_min, -omega_max)`` and
+    ``(v_max, omega_max)`` of ``ego`` (a :class:`~risk_env.scenario.parts.Ego`) [m/s, rad/s]."""
+    low = np.array([ego.v_min, -ego.omega_max], dtype=np.float32)
+    return low, np.array([ego.v_max, ego.omega_max], dtype=np.float32)
 
 
 class Observation(NamedTuple):

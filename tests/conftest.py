@@ -8,7 +8,7 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
 import pytest  # noqa: E402
 
-from risk_env.scenario import Scenario  # noqa: E402
+from risk_env.scenario.scenario import Scenario  # noqa: E402
 
 
 @pytest.fixture

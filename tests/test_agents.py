@@ -14,12 +14,13 @@ import numpy as np
 import pytest
 
 import risk_env  # noqa: F401  (registers RiskCrossing-v0)
-from agents import RMPC, SMPC, Policy, SolveReport, fallback, guesses
-from agents.budget import Budget, CallTimes
-from agents.solver import SolverSettings
+from agents import RMPC, SMPC, Policy, SolveReport
+from agents.mpc import fallback, guesses
+from agents.mpc.nlp.budget import Budget, CallTimes
+from agents.mpc.nlp.solver import SolverSettings
 from risk_env import Scenario, make_estimator, predict_array
 from risk_env import observation as ob
-from risk_env.risk import signed_box_distance
+from risk_env.risk.estimators import signed_box_distance
 
 UNCAPPED = math.inf
 """``max_solve_time`` of tests about the plans themselves: no wall-time cap, so a busy machine
@@ -236,8 +237,8 @@ def inside_the_box(scenario: Scenario) -> np.ndarray:
 def test_soft_problem_is_an_exact_penalty_where_the_hard_one_is_feasible(make, epsilon) -> None:
     """Along a closed loop, the soft problem solved from the same point as the hard one returns
     the hard plan with zero slacks: rho exceeds the risk rows' multipliers."""
-    from agents.ocp import soft_variant
-    from agents.step import Step
+    from agents.mpc.nlp.ocp import soft_variant
+    from agents.mpc.step import Step
 
     env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=epsilon, max_steps=14)
     agent = make(env.unwrapped.scenario)
@@ -250,7 +251,7 @@ def test_soft_problem_is_an_exact_penalty_where_the_hard_one_is_feasible(make, e
         assert report.fallback is None and agent.failures == 0
         if report.variant != "free":
             # the soft problem, started at the hard plan (slack costs 0), stays there
-            step = Step(agent, 1, obs, Budget(math.inf))
+            step = Step(agent._context(), agent._measure(1, obs), Budget(math.inf))
             hard, soft = agent._problem(step.variant), agent._problem(soft_variant(step.variant))
             plan = np.column_stack([report.inputs, report.path_speed])
             w0 = guesses.pack(soft, guesses.rollout(soft, step.x0, plan), plan)
@@ -426,14 +427,14 @@ def test_every_rung_keeps_its_iteration_limit_after_the_build(make) -> None:
     split of the bounds into equalities and inequalities: the build's timing calls must use the
     steps' pattern (they once left the soft problems' slacks unbounded, so the smallest soft rung
     ran hundreds of iterations at a limit of 4)."""
-    from agents.ocp import soft_variant
-    from agents.step import Step
+    from agents.mpc.nlp.ocp import soft_variant
+    from agents.mpc.step import Step
 
     env = gym.make("RiskCrossing-v0", uncertainty="high", max_steps=5)
     agent = make.from_env(env, max_solve_time=0.1)
     obs, _ = env.reset(seed=0)
     agent.predict(obs)
-    step = Step(agent, 0, obs, Budget(math.inf))
+    step = Step(agent._context(), agent._measure(0, obs), Budget(math.inf))
     for variant in (step.variant, soft_variant(step.variant)):
         pr = agent._problem(variant)
         args = step.args(pr)
@@ -443,10 +444,10 @@ def test_every_rung_keeps_its_iteration_limit_after_the_build(make) -> None:
 
 
 def test_calls_past_their_iteration_limit_are_counted() -> None:
-    """fatrop may run past max_iter (agents/budget.py): such calls are tallied, the others not."""
+    """fatrop may run past max_iter (agents/mpc/nlp/budget.py): such calls are tallied, the others not."""
     from types import SimpleNamespace
 
-    from agents import attempts
+    from agents.mpc import attempts
 
     limits = SolverSettings(max_iter=8, rungs=2, time_limit=1.0).rung_limits()
     problem = SimpleNamespace(limits=limits, times=CallTimes(limits, prior=1e-4, failing=1e-4))
@@ -573,8 +574,8 @@ def test_compiled_solver_writes_nothing_to_the_working_directory(tmp_path, monke
     np.testing.assert_allclose(action, plain.predict(obs)[0], atol=1e-6)
     assert agent.last_solve.iterations == plain.last_solve.iterations
     # a new process (here: the in-process solver cache emptied) loads the libraries, compiles nothing
-    from agents import compiled
-    from agents import solver as mpc
+    from agents.mpc.nlp import compiled
+    from agents.mpc.nlp import solver as mpc
 
     monkeypatch.setattr(mpc, "_SOLVER_CACHE", type(mpc._SOLVER_CACHE)())
     monkeypatch.setattr(compiled.subprocess, "run", lambda *a, **k: pytest.fail("compiled again"))
@@ -626,7 +627,7 @@ def test_monte_carlo_cold_start_goes_through_the_pilot():
 def test_uncertainty_levels_and_tolerances_share_one_solver():
     """Epsilon and the uncertainty are solver parameters: one build serves them all, and each agent
     still plans against its own beliefs."""
-    from agents import solver as mpc
+    from agents.mpc.nlp import solver as mpc
 
     mpc._SOLVER_CACHE.clear()
     first = SMPC(Scenario.preset("low", risk_tolerance=500.0), max_solve_time=UNCAPPED)
@@ -696,15 +697,15 @@ def test_episode_start_of_the_wrong_size_raises():
 def test_exact_smpc_risk_rows_and_their_jacobian_are_the_estimators() -> None:
     """The exact SMPC's risk row as the solver sees it, at the ego states of plans that use the
     tolerance: its value is ``max(clearance, (epsilon - R) / scale)`` with the env's numpy R,
-    conservative by at most the solver rule's shortfall (:class:`risk_env.risk.ExactRisk`), and
+    conservative by at most the solver rule's shortfall (:class:`risk_env.risk.estimators.ExactRisk`), and
     its Jacobian in the ego's position and speed that value's central differences, to the rule's
     accuracy (the solver differentiates the integral, the differences the rule's nodes too; see
-    :func:`risk_env.risk.disc_probability`): within 2 % each, 0.1 % in the median."""
+    :func:`risk_env.risk.estimators.disc_probability`): within 2 % each, 0.1 % in the median."""
     import casadi as ca
 
     from risk_env import Belief
-    from risk_env.ops import NUMPY
-    from risk_env.quadrature import SOLVER_SHORTFALL
+    from risk_env.models.ops import NUMPY
+    from risk_env.risk.quadrature import SOLVER_SHORTFALL
 
     epsilon = 1000.0
     env = gym.make("RiskCrossing-v0", uncertainty="medium", risk_tolerance=epsilon)

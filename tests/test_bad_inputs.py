@@ -15,10 +15,10 @@ import pytest
 
 import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents import RMPC, SMPC
-from agents.solver import SolverSettings
+from agents.mpc.nlp.solver import SolverSettings
 from risk_env import Scenario
-from risk_env.scenario import MAX_MASS, RISK_BOUNDS
-from risk_env.severity import make_severity
+from risk_env.risk.severity import make_severity
+from risk_env.scenario.scenario import MAX_MASS, RISK_BOUNDS
 
 WRONG_UNIT = (
     "risk_tolerance 1000 exceeds 2, the largest per-step risk of the 'injury' severity \\[injuries\\]"

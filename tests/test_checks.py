@@ -16,7 +16,7 @@ from gymnasium import spaces
 import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents.base import as_batch
 from risk_env import ENV_ID, Scenario, Variations, checks, observation
-from risk_env.env import RiskCrossingEnv
+from risk_env.envs.env import RiskCrossingEnv
 
 
 def make(**kwargs) -> RiskCrossingEnv:

@@ -92,7 +92,7 @@ def test_every_marker_expands(hooks):
 
 
 def test_the_scenario_table_has_every_override(hooks):
-    from risk_env.scenario import OVERRIDES
+    from risk_env.scenario.scenario import OVERRIDES
 
     table = hooks.scenario_fields()
     for name in OVERRIDES:

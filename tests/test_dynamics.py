@@ -2,7 +2,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from risk_env import dynamics
+from risk_env.models import dynamics
 
 
 def test_straight_line():

@@ -13,9 +13,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import risk_env
-from risk_env import ENV_ID, ESTIMATOR_NAMES, RiskCrossingEnv, Scenario, dynamics, observation, predict
-from risk_env.path import point
-from risk_env.risk import MonteCarloRisk, make_estimator
+from risk_env import ENV_ID, ESTIMATOR_NAMES, RiskCrossingEnv, Scenario, observation, predict
+from risk_env.models import dynamics
+from risk_env.models.path import point
+from risk_env.risk.estimators import MonteCarloRisk, make_estimator
 
 # The action Box is in physical units on purpose; Gymnasium's checker advises a normalised one.
 _NORMALISED_SPACE_ADVICE = r".*symmetric and normalized space.*"
@@ -66,7 +67,7 @@ def test_import_twice_registers_once_without_warning():
         importlib.reload(risk_env)
         importlib.reload(risk_env)
     assert ENV_ID in gym.registry
-    assert gym.registry[ENV_ID].entry_point == "risk_env.env:RiskCrossingEnv"
+    assert gym.registry[ENV_ID].entry_point == "risk_env.envs.env:RiskCrossingEnv"
     env = gym.make(ENV_ID)
     assert isinstance(env.unwrapped, risk_env.RiskCrossingEnv)
 

@@ -6,7 +6,9 @@ import pytest
 from scipy import special
 
 from risk_env import Belief, Scenario, make_estimator, predict_array
-from risk_env.exact_kernel import (
+from risk_env.models.ops import MATH, NUMPY
+from risk_env.risk.estimators import GEOMETRY_FLOOR, disc_probability, signed_box_distance
+from risk_env.risk.exact_kernel import (
     _PHI_LIM,
     _PHI_OFFSET,
     _PHI_STEP,
@@ -14,9 +16,7 @@ from risk_env.exact_kernel import (
     disc_probability_batch,
     disc_probability_scalar,
 )
-from risk_env.ops import MATH, NUMPY
-from risk_env.risk import GEOMETRY_FLOOR, disc_probability, signed_box_distance
-from risk_env.scenario import SEVERITY_NAMES
+from risk_env.scenario.scenario import SEVERITY_NAMES
 
 P_TOL = 1e-12
 """Absolute tolerance on P (in [0, 1]) between the kernels and the generic form."""
@@ -167,7 +167,7 @@ def test_exact_risk_every_path_equals_generic_form(severity):
 def test_few_near_states_take_the_scalar_loop_and_agree():
     """Batches with up to SCALAR_LOOP_MAX near states (one belief per state) are integrated one by
     one; with one more they take the batch kernel. Both equal the generic form."""
-    from risk_env.risk import SCALAR_LOOP_MAX
+    from risk_env.risk.estimators import SCALAR_LOOP_MAX
 
     s = Scenario.preset("high")
     est = make_estimator("exact", s)

@@ -11,13 +11,13 @@ import pytest
 from scipy import special
 
 from risk_env import Scenario, make_estimator, observation, predict
-from risk_env.dynamics import unicycle_step
-from risk_env.ops import CASADI, MATH, NUMPY
-from risk_env.path import PathBatch, path_error, point, project
-from risk_env.prediction import Belief, predict_step
-from risk_env.transition import move_object, observe
-from risk_env.truncnorm import transform
-from risk_env.variations import DRAWS, Variations, draw, vary
+from risk_env.envs.transition import move_object, observe
+from risk_env.envs.variations import DRAWS, Variations, draw, vary
+from risk_env.models.dynamics import unicycle_step
+from risk_env.models.ops import CASADI, MATH, NUMPY
+from risk_env.models.path import PathBatch, path_error, point, project
+from risk_env.models.truncnorm import transform
+from risk_env.prediction.belief import Belief, predict_step
 
 TOL = 1e-12
 RNG = np.random.default_rng(20)

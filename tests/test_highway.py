@@ -20,7 +20,6 @@ pytest.importorskip("highway_env")
 
 from agents import RMPC, SMPC  # noqa: E402
 from risk_env import ENV_ID, observation  # noqa: E402
-from risk_env.dynamics import unicycle_step  # noqa: E402
 from risk_env.highway import (  # noqa: E402
     IDMEgo,
     IntersectionAdapter,
@@ -31,9 +30,10 @@ from risk_env.highway import (  # noqa: E402
     vehicle_measurement,
 )
 from risk_env.highway import graphics as G  # noqa: E402
-from risk_env.ops import NUMPY  # noqa: E402
-from risk_env.path import point  # noqa: E402
-from risk_env.scenario import ReferencePath  # noqa: E402
+from risk_env.models.dynamics import unicycle_step  # noqa: E402
+from risk_env.models.ops import NUMPY  # noqa: E402
+from risk_env.models.path import point  # noqa: E402
+from risk_env.scenario.scenario import ReferencePath  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 KINEMATIC = {"action": {"type": "ContinuousAction", "dynamical": False}}
@@ -315,7 +315,7 @@ def test_highway_renderer_draws_the_scene_headless():
     for _ in range(4):
         env.step(np.array([3.0, 0.0], dtype=np.float32))
     frame = env.render()
-    renderer = env.unwrapped._renderer
+    renderer = env.unwrapped._view._renderer
     assert isinstance(renderer, G.HighwayRenderer)
     assert frame.shape == (450, 800, 3) and frame.dtype == np.uint8
     for (x, y), colour in (
@@ -330,7 +330,7 @@ def test_highway_renderer_draws_the_scene_headless():
     auto = gym.make(ENV_ID, render_mode="rgb_array")
     auto.reset()
     auto.render()
-    assert isinstance(auto.unwrapped._renderer, G.HighwayRenderer)
+    assert isinstance(auto.unwrapped._view._renderer, G.HighwayRenderer)
     with pytest.raises(ValueError, match="unknown renderer 'fancy'"):
         gym.make(ENV_ID, renderer="fancy")
 
@@ -340,7 +340,7 @@ def test_highway_renderer_draws_every_object():
     env.reset(seed=0)
     env.step(np.array([2.0, 0.0], dtype=np.float32))
     frame = env.render()
-    renderer = env.unwrapped._renderer
+    renderer = env.unwrapped._view._renderer
     assert len(renderer._objects) == 2
     for x, y, *_ in env.unwrapped.object_measurements:
         u, w = np.round(renderer._to_px(x + 0.5, y)).astype(int)
@@ -380,7 +380,7 @@ def test_import_without_highway_env_keeps_risk_env_working():
         env = gym.make("RiskCrossing-v0", render_mode="rgb_array")
         env.reset(seed=0)
         assert env.render().ndim == 3
-        print(type(env.unwrapped._renderer).__name__)
+        print(type(env.unwrapped._view._renderer).__name__)
         try:
             import risk_env.highway
         except ImportError as err:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from risk_env import ENV_ID, observation
-from risk_env.ops import NUMPY
+from risk_env.models.ops import NUMPY
 
 
 def test_sizes_and_slots():

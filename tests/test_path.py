@@ -3,9 +3,9 @@ import math
 import casadi as ca
 import numpy as np
 
-from risk_env import path
-from risk_env.ops import CASADI
-from risk_env.scenario import ReferencePath, Scenario
+from risk_env.models import path
+from risk_env.models.ops import CASADI
+from risk_env.scenario.scenario import ReferencePath, Scenario
 
 PAPER = Scenario().path
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from gymnasium.utils import seeding
 
-from risk_env.pcg64 import MAX_DRAWS, GeneratorBatch, PCG64Batch
+from risk_env.envs.pcg64 import MAX_DRAWS, GeneratorBatch, PCG64Batch
 
 
 def _generators(seeds: list[int | None]) -> list[np.random.Generator]:

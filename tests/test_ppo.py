@@ -16,12 +16,12 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 import risk_env  # noqa: E402
-from agents.ppo import FEATURES, Context, FeatureSpec, InputLimits, PPOAgent, features, to_inputs  # noqa: E402
-from agents.ppo_env import TERMS, LevelMix, PolicyView, RewardWeights, SB3VecEnv  # noqa: E402
+from agents.ppo.policy import FEATURES, Context, FeatureSpec, InputLimits, PPOAgent, features, to_inputs  # noqa: E402
+from agents.ppo.training import TERMS, LevelMix, PolicyView, RewardWeights, SB3VecEnv  # noqa: E402
 from benchmarks.ppo_eval import best_seed, seed_table  # noqa: E402
 from benchmarks.rollout import rollout  # noqa: E402
 from risk_env import Scenario, observation  # noqa: E402
-from risk_env.parts import Uncertainty  # noqa: E402
+from risk_env.scenario.parts import Uncertainty  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "agents" / "models"
@@ -43,7 +43,7 @@ def test_features_are_in_the_egos_frame() -> None:
 
 
 def _features_before(obs: np.ndarray) -> np.ndarray:
-    """:func:`agents.ppo.features` as it was before the object slots, on the old 15-entry layout
+    """:func:`agents.ppo.policy.features` as it was before the object slots, on the old 15-entry layout
     (ego pose 0..2, input 3..4, object 5..9, lambda 10, path error 11..14): the shipped policies
     were trained on these numbers (here sin, cos and hypot entry by entry from ``math``, as the
     features now take them to be the same on every CPU)."""

@@ -2,10 +2,10 @@ import casadi as ca
 import numpy as np
 from scipy import stats
 
-from risk_env import dynamics
-from risk_env.ops import CASADI
-from risk_env.prediction import Belief, predict, predict_array
-from risk_env.scenario import Scenario
+from risk_env.models import dynamics
+from risk_env.models.ops import CASADI
+from risk_env.prediction.belief import Belief, predict, predict_array
+from risk_env.scenario.scenario import Scenario
 
 MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
 

@@ -30,9 +30,9 @@ from agents import RMPC, SMPC
 from agents.base import Policy
 from risk_env import ENV_ID, ESTIMATOR_NAMES, OBJECT_MOTIONS, RISK_TOLERANCES, RiskCrossingEnv, Scenario
 from risk_env import observation as ob
-from risk_env.path import point
-from risk_env.scenario import OVERRIDES, RISK_BOUNDS, SEVERITY_NAMES, UNCERTAINTY_PRESETS
-from risk_env.transition import observe
+from risk_env.envs.transition import observe
+from risk_env.models.path import point
+from risk_env.scenario.scenario import OVERRIDES, RISK_BOUNDS, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 FUZZED: collections.Counter[str] = collections.Counter()
 """Fuzzed steps by test family (single-env steps, batched copy-steps, agent decisions)."""

@@ -16,7 +16,7 @@ README = (ROOT / "README.md").read_text()
 BLOCKS = re.findall(r"^```(\w*)\n(.*?)^```", README, flags=re.DOTALL | re.MULTILINE)
 PYTHON_BLOCKS = [code for lang, code in BLOCKS if lang == "python"]
 OPTIONAL = {
-    "agents.ppo": "stable_baselines3",
+    "agents.ppo.policy": "stable_baselines3",
     "PPOAgent": "stable_baselines3",
     "risk_env.highway": "highway_env",
 }

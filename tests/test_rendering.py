@@ -14,7 +14,7 @@ import pytest
 
 import risk_env
 from risk_env import ENV_ID
-from risk_env import rendering as R
+from risk_env.render import rendering as R
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,7 +43,7 @@ def test_rgb_array_after_reset_and_steps(short_scenario):
         env.step(np.array([4.0, 0.0], dtype=np.float32))
     later = env.render()
     assert later.shape == first.shape and not np.array_equal(first, later)  # the scene moved
-    renderer = env.unwrapped._renderer
+    renderer = env.unwrapped._view._renderer
     ego = env.unwrapped._ego_pose
     # The ego disc is drawn where the ego is (behind its centre: the heading line is white).
     assert pixel(later, renderer, ego[0] - 0.7, ego[1]) == R.EGO
@@ -64,7 +64,7 @@ def test_plan_is_drawn_and_cleared():
     np.testing.assert_array_equal(env.unwrapped.plan, xy)
     planned = env.render()
     assert has_colour(planned, R.PLAN)
-    assert pixel(planned, env.unwrapped._renderer, 5.0, 10.0) == R.PLAN
+    assert pixel(planned, env.unwrapped._view._renderer, 5.0, 10.0) == R.PLAN
     env.unwrapped.set_plan(None)
     np.testing.assert_array_equal(env.render(), plain)
     env.unwrapped.set_plan(xy)
@@ -119,7 +119,7 @@ def test_every_object_and_its_boxes_are_drawn():
     for _ in range(3):
         env.step(np.array([2.0, 0.0], dtype=np.float32))
     frame = env.render()
-    renderer = env.unwrapped._renderer
+    renderer = env.unwrapped._view._renderer
     for x, y, theta, *_ in env.unwrapped.object_measurements:  # each disc, beside its heading line
         assert pixel(frame, renderer, x + 0.7 * np.sin(theta), y - 0.7 * np.cos(theta)) == R.OBJECT
     # each object's nearest truncation box: its left edge, at the belief's mean height

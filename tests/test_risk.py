@@ -6,10 +6,10 @@ import pytest
 from scipy import integrate, stats
 
 from risk_env import ESTIMATOR_NAMES, Belief, Scenario, make_estimator, predict_array
-from risk_env.ops import CASADI, NUMPY
-from risk_env.quadrature import SOLVER_SHORTFALL, SOLVER_SIGMA_BREAKS, SOLVER_SUPPORT
-from risk_env.risk import WorstCaseRisk, disc_probability, signed_box_distance
-from risk_env.scenario import SEVERITY_NAMES
+from risk_env.models.ops import CASADI, NUMPY
+from risk_env.risk.estimators import WorstCaseRisk, disc_probability, signed_box_distance
+from risk_env.risk.quadrature import SOLVER_SHORTFALL, SOLVER_SIGMA_BREAKS, SOLVER_SUPPORT
+from risk_env.scenario.scenario import SEVERITY_NAMES
 
 MEASUREMENT = np.array([5.0, -5.0, np.pi / 2, 3.0, 1e-4])
 
@@ -267,7 +267,7 @@ def test_smoothed_monte_carlo_bias_in_expectation_is_small():
 
 @pytest.mark.parametrize("severity", SEVERITY_NAMES)
 def test_smooth_severity_lies_within_its_width_above_the_severity(severity):
-    from risk_env.severity import make_severity
+    from risk_env.risk.severity import make_severity
 
     model = make_severity(Scenario(severity=severity))
     v_e, v_o = np.meshgrid(np.linspace(-4, 8, 61), np.linspace(-6, 6, 61))

@@ -1,4 +1,4 @@
-"""The SMPC's episode risk budget and risk weight (agents.risk_budget): bad input, the budget row in a
+"""The SMPC's episode risk budget and risk weight (agents.mpc.nlp.risk_budget): bad input, the budget row in a
 closed loop, the accumulator against the env's episode risk, B = 0 against epsilon = 0."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import pytest
 
 import risk_env  # noqa: F401
 from agents import RMPC, SMPC
-from agents import risk_budget as rb
-from risk_env.scenario import Scenario
+from agents.mpc.nlp import risk_budget as rb
+from risk_env.scenario.scenario import Scenario
 
 
 @pytest.mark.parametrize(
@@ -111,7 +111,7 @@ def test_budget_and_weight_sum_over_every_object_slot() -> None:
     """Two objects: one p layout ([epsilon, v_ref, 2 slot blocks, TERMS]); the budget's and the
     weight's per-stage R is the sum over the active slots, so the agent's spent risk is the env's
     summed episode risk, and the budget holds without a fallback."""
-    from agents.ocp import SLOT_SIZE, TERMS
+    from agents.mpc.nlp.parameters import SLOT_SIZE, TERMS
 
     budget = 0.3
     env = gym.make(

@@ -5,8 +5,8 @@ import re
 import numpy as np
 import pytest
 
-from risk_env.path import point, project
-from risk_env.scenario import (
+from risk_env.models.path import point, project
+from risk_env.scenario.scenario import (
     OVERRIDES,
     RISK_TOLERANCES,
     SCENE_NAMES,

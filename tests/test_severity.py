@@ -17,9 +17,9 @@ import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents import RMPC, SMPC
 from risk_env import Belief, Scenario, make_estimator, predict_array
 from risk_env import observation as ob
-from risk_env.ops import CASADI, MATH, NUMPY
-from risk_env.scenario import SEVERITY_NAMES
-from risk_env.severity import InjurySeverity, make_severity
+from risk_env.models.ops import CASADI, MATH, NUMPY
+from risk_env.risk.severity import InjurySeverity, make_severity
+from risk_env.scenario.scenario import SEVERITY_NAMES
 
 BETA0, BETA1 = -4.591, 0.185
 """Geisslinger et al. (2023), the MAIS3+ model without impact angle."""

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from risk_env import ENV_ID, ESTIMATOR_NAMES, Scenario, make_estimator, predict
-from risk_env.total_risk import make_estimators, total
+from risk_env.risk.total_risk import make_estimators, total
 
 # Two objects flanking the ego's line one step ahead (after 4 m/s for 0.5 s the ego is at (-8, 10)):
 # both discs are within reach, each with its own radius, mass and uncertainty.

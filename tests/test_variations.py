@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from risk_env import ENV_ID, Scenario, Variations
-from risk_env.path import PathBatch, point, project
-from risk_env.variations import vary
+from risk_env.envs.variations import vary
+from risk_env.models.path import PathBatch, point, project
 
 
 def test_zero_variations_give_the_base_scenario() -> None:

@@ -9,8 +9,8 @@ from gymnasium.vector import AutoresetMode
 
 import risk_env
 from risk_env import Variations
-from risk_env.pcg64 import VECTORIZED_MIN, GeneratorBatch
-from risk_env.vector_env import SCALAR_COPIES, RiskCrossingVectorEnv
+from risk_env.envs.pcg64 import VECTORIZED_MIN, GeneratorBatch
+from risk_env.envs.vector_env import SCALAR_COPIES, RiskCrossingVectorEnv
 
 TOL = 1e-12
 """Relative tolerance between the single env (Python floats), the batched env's numpy path and its

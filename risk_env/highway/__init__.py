@@ -4,7 +4,7 @@
   graphics (``renderer="highway"``), and our overlays (truncation boxes, Monte Carlo draws, an
   MPC plan) on any highway-env scene;
 - :class:`RiskCostWrapper`: ``info["risk"]``, ``info["cost"]`` and ``info["risk_violation"]`` for
-  any highway-env environment, from :func:`risk_env.predict` and :mod:`risk_env.risk`;
+  any highway-env environment, from :func:`risk_env.predict` and :mod:`risk_env.risk.estimators`;
 - :class:`IntersectionAdapter`: our MPC agents drive highway-env's controlled vehicle on
   ``intersection-v1`` with continuous actions; :class:`IDMEgo` is highway-env's own IDM driver for
   comparison.

@@ -7,7 +7,7 @@
 highway-env env with an SB3-style policy drives it.
 
 **The reference path.** The MPC core follows one constant-curvature arc, a
-:class:`~risk_env.scenario.ReferencePath` (:mod:`agents.ocp` builds its problem from it). The
+:class:`~risk_env.scenario.scenario.ReferencePath` (:mod:`agents.mpc.nlp.ocp` builds its problem from it). The
 controlled vehicle's route is a chain of highway-env lanes, each straight (curvature 0) or circular
 (curvature 1/radius), so each lane *is* such an arc, exactly (:class:`RoutePath`). The adapter keeps
 one agent per lane of the route, built on the scenario re-posed on that lane (same numbers,
@@ -19,7 +19,7 @@ plan bends at the hand-over, one step late. The new agent starts cold (no warm s
 
 **The objects.** The agent has ``slots`` object slots (default :data:`DEFAULT_SLOTS`; the adapter
 builds its agents with ``object_slots=slots``) and one solve plans against every vehicle it is
-handed (:mod:`agents.objects`). The adapter hands it every observed vehicle, nearest first, up to
+handed (:mod:`agents.mpc.objects`). The adapter hands it every observed vehicle, nearest first, up to
 the slot count; the other slots are flagged absent (no stand-in object, no choice of a "first
 conflict"). Only when more vehicles are observed than there are slots are the farthest left out.
 Each measurement is observed position, heading and speed; its turn rate is the change of its
@@ -50,13 +50,14 @@ import numpy as np
 
 from risk_env import checks
 from risk_env import observation as layout
-from risk_env.dynamics import unicycle_step
 from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
+from risk_env.highway.control import highway_action
 from risk_env.highway.idm import IDMEgo, reached
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
-from risk_env.ops import NUMPY
-from risk_env.path import path_error_vector, project
-from risk_env.scenario import ReferencePath, Scenario
+from risk_env.models.dynamics import unicycle_step
+from risk_env.models.ops import NUMPY
+from risk_env.models.path import path_error_vector, project
+from risk_env.scenario.scenario import ReferencePath, Scenario
 
 INTERSECTION_CONFIG: dict[str, Any] = {
     "action": {
@@ -100,8 +101,6 @@ for the two to count as the same vehicle (turn-rate estimate)."""
 CURVE_SPEED_SHARE = 0.9
 """On a circular lane v_ref is capped to this share of ``omega_max * radius``, so the lane stays
 followable (:class:`~risk_env.Scenario` requires ``curvature * v_ref <= omega_max``)."""
-MIN_TURN_SPEED = 0.5
-"""Below this mean speed [m/s] the steering for a turn rate is computed as at this speed."""
 
 
 VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
@@ -270,49 +269,10 @@ class IntersectionAdapter:
     ) -> tuple[np.ndarray, float]:
         """Our ``(v [m/s], omega [rad/s])``, from the current ``speed`` [m/s] and ``steering``
         [rad], as highway-env's normalised action ``(2,)`` float32, and the steering angle [rad]
-        it applies (see the module docstring)."""
+        it applies (:func:`risk_env.highway.control.highway_action`)."""
         base = unwrapped_highway(self.env)
-        action_type = base.action_type
         half_length = 0.5 * float(base.vehicle.LENGTH)
-        accel = (v - speed) / self.dt
-        mean = 0.5 * (v + speed)
-        if abs(mean) < MIN_TURN_SPEED:
-            mean = math.copysign(MIN_TURN_SPEED, mean if mean != 0 else 1.0)
-        lo, hi = action_type.steering_range
-        beta = self._slip_for(omega, mean, half_length, slip_angle(steering), slip_angle(hi))
-        steering = float(np.clip(math.atan(2.0 * math.tan(beta)), lo, hi))
-        a_lo, a_hi = action_type.acceleration_range
-        normalised = np.array(
-            [2.0 * (accel - a_lo) / (a_hi - a_lo) - 1.0, 2.0 * (steering - lo) / (hi - lo) - 1.0]
-        )
-        return np.clip(normalised, -1.0, 1.0).astype(np.float32), steering
-
-    # ---------------------------------------------------------------- internals
-    def _slip_for(
-        self, omega: float, mean_speed: float, half_length: float, beta_now: float, beta_max: float
-    ) -> float:
-        """The slip angle beta [rad] whose step ends at the heading the unicycle predicts.
-
-        Changing the steering turns the direction of travel at once by ``beta - beta_now``; then
-        it turns at ``mean_speed sin(beta) / (length/2)`` for T. Solve
-        ``beta - beta_now + T mean_speed sin(beta) / (length/2) = omega T`` (Newton from the
-        small-angle solution), so the course at the end of the step is the model's (the chord's
-        direction then differs by ``(beta - beta_now) / 2``, instead of the whole jump).
-        """
-        gain = mean_speed / half_length
-        dt = self.dt
-
-        def residual(b: float) -> float:
-            return (b - beta_now) / dt + gain * math.sin(b) - omega
-
-        slope0 = 1.0 / dt + gain
-        beta = (omega + beta_now / dt) / slope0 if slope0 > 0 else 0.0
-        for _ in range(4):
-            slope = 1.0 / dt + gain * math.cos(beta)
-            if slope <= 0:  # fast reversing: no monotone solution; the small-angle one stands
-                break
-            beta -= residual(beta) / slope
-        return float(np.clip(beta, -beta_max, beta_max))
+        return highway_action(v, omega, speed, steering, self.dt, half_length, base.action_type)
 
     @staticmethod
     def _check_config(base: Any) -> None:

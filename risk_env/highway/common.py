@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from risk_env.scenario import Scenario
+from risk_env.scenario.scenario import Scenario
 
 SPEED_BOUND = 40.0
 """Speed truncation [m/s] of the object's prediction in highway-env worlds, ``(-40, 40)``: the
@@ -100,7 +100,7 @@ def highway_scenario(
     Set from the env: ``dt`` = :func:`policy_period` (the prediction steps are env steps, so a
     preset's growth per step is growth per env step). Changed from the paper:
     ``velocity_bounds0 = (-SPEED_BOUND, SPEED_BOUND)``. Everything else is the paper's unless
-    overridden by flat name (:data:`risk_env.scenario.OVERRIDES`), e.g. ``ego_radius=2.0``,
+    overridden by flat name (:data:`risk_env.scenario.scenario.OVERRIDES`), e.g. ``ego_radius=2.0``,
     ``severity="plastic"``. Positions and the path in the scenario are not used by the wrapper.
     """
     values: dict[str, Any] = {"dt": policy_period(env), "velocity_bounds0": (-SPEED_BOUND, SPEED_BOUND)}

@@ -34,10 +34,10 @@ from highway_env.road.road import Road, RoadNetwork  # noqa: E402
 from highway_env.vehicle.graphics import VehicleGraphics  # noqa: E402
 from highway_env.vehicle.kinematics import Vehicle  # noqa: E402
 
-from risk_env.path import point  # noqa: E402
-from risk_env.prediction import Belief, predict, predict_array  # noqa: E402
-from risk_env.rendering import BEYOND_GOAL, SIZE, Renderer, blend, frame_array  # noqa: E402
-from risk_env.scenario import Scenario  # noqa: E402
+from risk_env.models.path import point  # noqa: E402
+from risk_env.prediction.belief import Belief, predict, predict_array  # noqa: E402
+from risk_env.render.rendering import BEYOND_GOAL, SIZE, Renderer, blend, frame_array  # noqa: E402
+from risk_env.scenario.scenario import Scenario  # noqa: E402
 
 EGO = VehicleGraphics.EGO_COLOR
 OBJECT = VehicleGraphics.BLUE
@@ -138,7 +138,7 @@ def draw_text(target: pygame.Surface, lines: Sequence[str], font: pygame.font.Fo
 class HighwayRenderer(Renderer):
     """``RiskCrossing-v0`` in highway-env's graphics (see the module docstring).
 
-    The view, the window and ``close`` are the basic :class:`risk_env.rendering.Renderer`'s (so
+    The view, the window and ``close`` are the basic :class:`risk_env.render.rendering.Renderer`'s (so
     ``_to_px`` maps world to frame pixels alike); ``render`` takes the same arguments and returns
     ``(H, W, 3)`` uint8 in ``"rgb_array"`` mode. ``estimator``: the env's risk estimator's name
     (``"monte_carlo"`` adds the draws).
@@ -193,7 +193,7 @@ class HighwayRenderer(Renderer):
         plan: np.ndarray | None = None,
         status: Sequence[str] = (),
     ) -> np.ndarray | None:
-        """Draw one frame (arguments as :meth:`risk_env.rendering.Renderer.render`)."""
+        """Draw one frame (arguments as :meth:`risk_env.render.rendering.Renderer.render`)."""
         s, world = self.scenario, self._world
         RoadGraphics.display(self._road, world)
         gx, gy, _ = point(s.path, s.path.lambda_goal)

@@ -1,5 +1,5 @@
 """The route of highway-env's controlled vehicle as our reference paths: each lane of the route
-(straight or circular) as a :class:`~risk_env.scenario.ReferencePath`, and the route's arc length."""
+(straight or circular) as a :class:`~risk_env.scenario.scenario.ReferencePath`, and the route's arc length."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from risk_env.path import point, project
-from risk_env.scenario import Pose, ReferencePath
+from risk_env.models.path import point, project
+from risk_env.scenario.scenario import Pose, ReferencePath
 
 LaneIndex = tuple[str, str, int]
 """highway-env's lane index ``(from node, to node, lane id)``."""

@@ -10,9 +10,9 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import highway_scenario, policy_period, unwrapped_highway, vehicle_measurement
-from risk_env.prediction import Belief, predict
-from risk_env.risk import RiskEstimator, make_estimator
-from risk_env.scenario import Scenario
+from risk_env.prediction.belief import Belief, predict
+from risk_env.risk.estimators import RiskEstimator, make_estimator
+from risk_env.scenario.scenario import Scenario
 
 
 class RiskCostWrapper(gym.Wrapper):
@@ -55,7 +55,7 @@ class RiskCostWrapper(gym.Wrapper):
         scenario: a whole :class:`~risk_env.Scenario` instead of ``uncertainty``, ``risk_tolerance``
             and ``overrides``; its ``dt`` must be the env's step (:func:`policy_period`).
         seed: seed of the wrapper's generator until ``reset(seed=...)`` re-seeds it.
-        **overrides: flat scenario parameters (:data:`risk_env.scenario.OVERRIDES`), on top of
+        **overrides: flat scenario parameters (:data:`risk_env.scenario.scenario.OVERRIDES`), on top of
             :func:`risk_env.highway.highway_scenario`'s.
     """
 

@@ -1,0 +1,135 @@
+"""The real-time bound of an MPC step: a wall-time budget shared by its solver calls, and the choice
+of the solver rung (:meth:`agents.mpc.nlp.solver.SolverSettings.rung_limits`) that fits what is left.
+
+IPOPT stops itself at its ``max_wall_time``; fatrop (CasADi 3.8) has no time limit, only
+``max_iter``, so its calls are predicted from the measured time per iteration of the same NLP.
+That ``max_iter`` does not bound every call: fatrop 1.1.8 sometimes runs on past it. In the stress
+benchmark such calls ran 31 and 1,001 iterations at a limit of 4, their iteration logs starting at
+fatrop's default barrier parameter 0.1 rather than the ``mu_init`` set, the longer one ending at
+fatrop's default limit of 1,000; ``iteration_callback`` is ignored by the plugin, so nothing can stop
+such a call. :attr:`agents.SolveReport.overran_calls` counts them; ``benchmarks.stress`` reports them.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+
+WINDOW = 64
+"""Calls remembered per NLP variant for the time-per-iteration estimate."""
+LONG_CALL = 20
+"""Calls of at least this many iterations are also remembered apart: the calls that run into a
+rung's limit are long ones, and a failing call's iterations cost more (line searches,
+restoration) than a converging one's."""
+SKIP_DISCOUNT = 0.8
+"""Factor on the estimate after each call that did not fit (reset by the next measured call)."""
+END_SHARE = 0.1
+"""Share of the cap no solver call may use: the step's own work after its last call, and the
+error of the calls' predicted times."""
+QUANTILE = 90.0
+"""The estimate is this percentile of the remembered times per iteration ..."""
+SAFETY = 1.3
+"""... times this factor (a call's iterations differ in cost: line searches, restoration)."""
+CALL_OVERHEAD = 5e-4
+"""Time [s] a call costs besides its iterations (CasADi's set-up, copying), before any is measured."""
+IPOPT_OVERRUN = 2e-3
+"""Time [s] an IPOPT call may take beyond its ``max_wall_time`` (it checks once per iteration)."""
+
+
+class Budget:
+    """The time left for the solver calls of one step: ``deadline = start + (1 - END_SHARE) cap``
+    [s, ``time.perf_counter``].
+
+    A step that runs inside another (a pilot problem's) gets the outer step's deadline, less the
+    outer ``reserve``, when that comes first (:meth:`open`)."""
+
+    def __init__(self, cap: float, start: float | None = None) -> None:
+        self.start = time.perf_counter() if start is None else start
+        self.cpu_start = time.process_time()
+        """The process's CPU time at the start [s, ``time.process_time``]."""
+        self.deadline = self.start + (1.0 - END_SHARE) * cap
+        """When the step's last solver call must end [s, ``time.perf_counter``]."""
+        self.capped = False
+        """Whether the budget cut a call short (a smaller rung) or skipped one."""
+        self.reserve = 0.0
+        """What a step nested in this one must leave [s]."""
+
+    def left(self, reserve: float = 0.0) -> float:
+        """Seconds left before the deadline, minus ``reserve`` (kept for later levels)."""
+        return self.deadline - time.perf_counter() - reserve
+
+    @classmethod
+    @contextmanager
+    def open(cls, cap: float) -> Iterator[Budget]:
+        """The budget of a step of cap ``cap`` [s], active (for nested steps) inside the block."""
+        budget = cls(cap)
+        outer = _ACTIVE.get()
+        if outer is not None:
+            budget.deadline = min(budget.deadline, outer.deadline - outer.reserve)
+        token = _ACTIVE.set(budget)
+        try:
+            yield budget
+        finally:
+            _ACTIVE.reset(token)
+
+
+_ACTIVE: ContextVar[Budget | None] = ContextVar("active_budget", default=None)
+
+
+class CallTimes:
+    """The solver calls of one NLP variant: the rungs' limits and the measured wall time per
+    iteration of recent calls, shared by every agent that uses the variant in this process."""
+
+    def __init__(self, limits: tuple[tuple[int, float | None], ...], prior: float, failing: float) -> None:
+        self.limits = limits
+        """``(max_iter, max_wall_time [s] or None)`` of each rung, the largest first."""
+        self.prior = prior
+        """Time per iteration [s] of a call on the scenario's start, measured at the build."""
+        self.failing = failing
+        """... and of a failing call (the object inside the boxes), measured at the build."""
+        self._all: deque[float] = deque([prior], maxlen=WINDOW)
+        self._long: deque[float] = deque([max(prior, failing)], maxlen=WINDOW)
+        self._quantiles = (prior, max(prior, failing))
+        self._discount = 1.0
+
+    def record(self, iterations: int, seconds: float) -> None:
+        """Remember a call of ``iterations`` iterations that took ``seconds``."""
+        if iterations >= 1:
+            per_iteration = max(seconds - CALL_OVERHEAD, 0.0) / iterations
+            self._all.append(per_iteration)
+            if iterations >= LONG_CALL:
+                self._long.append(per_iteration)
+            self._quantiles = (_quantile(self._all), _quantile(self._long))
+            self._discount = 1.0
+
+    def per_iteration(self, iterations: int = 1) -> float:
+        """The conservative time per iteration [s] of a call of up to ``iterations`` iterations:
+        :data:`SAFETY` times the :data:`QUANTILE` percentile of the recent calls' (of the recent
+        long calls' for a long one)."""
+        return self._discount * SAFETY * self._quantiles[iterations >= LONG_CALL]
+
+    def predict(self, rung: int) -> float:
+        """Upper estimate [s] of a call at ``rung``."""
+        iterations, wall = self.limits[rung]
+        if wall is not None:
+            return wall + IPOPT_OVERRUN
+        return CALL_OVERHEAD + iterations * self.per_iteration(iterations)
+
+    def rung(self, available: float) -> int | None:
+        """The largest rung whose call fits in ``available`` seconds (None: none fits; then the
+        estimate is discounted by :data:`SKIP_DISCOUNT` until the next measured call, so that a
+        pessimistic estimate cannot keep every call out for good)."""
+        for r in range(len(self.limits)):
+            if self.predict(r) <= available:
+                return r
+        self._discount *= SKIP_DISCOUNT
+        return None
+
+
+def _quantile(history: deque[float]) -> float:
+    """The :data:`QUANTILE` percentile of ``history`` (nearest rank; cheaper than numpy's)."""
+    ordered = sorted(history)
+    return ordered[round(QUANTILE / 100.0 * (len(ordered) - 1))]

@@ -1,0 +1,105 @@
+"""The SMPC's episode risk budget and its risk weight: checks, the per-step bound a budget implies,
+and the solver parameters of both (the NLP's rows are in :mod:`agents.mpc.nlp.ocp`).
+
+**The budget** ``risk_budget=B`` [the severity's unit, per episode]. At step k the plan must satisfy
+
+    spent_k + sum_{n=1..N} R_{n|k} <= B,
+
+where R_{n|k} is the agent's own per-stage risk (the SMPC's risk expression: for the exact risk
+:meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`, never below the env's R) and spent_k is the risk of
+the steps already taken: the sum, since the episode began, of each applied action's one-step risk
+R_{1|j}, j < k, by the same estimator (the env's R at the planned state 1, from the agent's own
+report; :meth:`agents.SMPC.spent_risk`). The agent still sees only observations; spent restarts
+with the episode (a new episode is detected as the warm start is: ``episode_start`` or an
+observation that does not continue the last one).
+
+The sum across stages is carried stage-locally, the way the state carries the previous input: an
+accumulator c_n = R_1 + ... + R_{n-1} (c_1 = 0, c_{n+1} = c_n + R_n, a row of stage n) and at stage
+N the row ``(B - spent_k - c_N - R_N) / B >= backoff`` (relative to B: the plan keeps ``backoff``,
+1e-3 by default, of the budget spare, so rounding of float32 observations and the solver's
+constraint tolerance of 1e-6 cannot carry the episode over B). B, spent_k, the normaliser 1/B, a
+switch-off and the weight are solver parameters (:data:`agents.mpc.nlp.parameters.TERMS`): one built
+solver serves
+every budget.
+
+*Why it holds.* If every step's hard problem is solved, spent_{k+1} = spent_k + R_{1|k} <= B -
+sum_{n>=2} R_{n|k} <= B, so the episode's summed risk stays within B. A step whose plan misses the
+budget is a fallback (the soft problem, whose budget row has its own L1-penalised slack, or a
+manoeuvre), counted as always: the bound is promised for episodes without one.
+
+*What it bounds.* With ``severity="probability"`` (s = 1) each R_{k+1|k} is the probability of a
+collision at step k + 1 given the history up to k. Assume (i) the prediction is the true
+distribution of the next step (``object_motion="sampled"`` draws it from that very model) and (ii)
+the risk counted is that of the step actually taken. Then, with C_k the event "collision at step
+k", P(any collision) = P(union_k C_k) <= sum_k P(C_k) (Boole's inequality) = sum_k E[P(C_k | history)]
+= E[sum_k R_{k|k-1}] (the tower rule and linearity of expectation) = E[episode risk] <= B, since
+the episode risk is at most B in every episode without a fallback. With ``"injury"`` (s = expected
+seriously injured people of a collision) the same steps without Boole's inequality give: the
+expected number of serious injuries per episode is E[sum_k I_{C_k} s_k] = E[episode risk] <= B.
+
+**Per-step bound.** The budget may stand alongside epsilon or instead of it: ``risk_tolerance=
+math.inf`` means no per-step bound of its own. Every R_n is at most B (all are >= 0), so the
+per-step rows are given epsilon_eff = min(epsilon, B + backoff * scale) (implied by the budget,
+they keep the rows' clearance form, which helps the solver), and B = 0 is epsilon = 0 exactly (the
+``"zero"`` form keeps the disc off every truncation box, so every R_n is 0 and the budget row,
+switched off then, would be 0 <= 0).
+
+**The weight** ``risk_weight=w`` [cost per unit of the severity] adds ``w * sum_{n=1..N} R_{n|k}``
+to the objective, with or without a budget or a tolerance: a penalty to compare with the
+constraint on equal terms. The RMPC takes neither: its worst case is no expectation.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from agents.mpc.nlp.parameters import TERMS
+from risk_env import checks
+
+
+def check_budget(value: Any, name: str = "risk_budget") -> float | None:
+    """``value`` as an episode risk budget: None, or a finite number >= 0; else ``ValueError``
+    naming it."""
+    if value is None:
+        return None
+    return _nonnegative(value, name, "an episode risk budget [the severity's unit]")
+
+
+def check_weight(value: Any, name: str = "risk_weight") -> float | None:
+    """``value`` as the risk weight of the objective: None, or a finite number >= 0."""
+    if value is None:
+        return None
+    return _nonnegative(value, name, "a weight [cost per unit of the severity]")
+
+
+def _nonnegative(value: Any, name: str, what: str) -> float:
+    if not checks.is_real(value):  # a number of any real type; not a bool, not a string
+        raise TypeError(f"{name} must be {what}, a finite number >= 0, got {checks.describe(value)}")
+    number = float(value)
+    if not (math.isfinite(number) and number >= 0.0):
+        raise ValueError(f"{name} must be {what}, a finite number >= 0, got {value!r}")
+    return number
+
+
+def effective_tolerance(epsilon: float, budget: float | None, backoff: float, scale: float) -> float:
+    """The per-step bound the risk rows are given: epsilon without a budget; with one,
+    ``min(epsilon, B + backoff * scale)`` (implied by the budget), and 0 at B = 0."""
+    if budget is None:
+        return epsilon
+    if budget <= 0.0:
+        return 0.0
+    return min(epsilon, budget + backoff * scale)
+
+
+def terms_parameters(budget: float | None, spent: float, weight: float | None) -> np.ndarray:
+    """The :data:`agents.mpc.nlp.parameters.TERMS` solver parameters: (B, spent, 1/B, switch-off,
+    w); without a budget (or at B = 0, where epsilon = 0 holds every R_n at 0) the row is switched off."""
+    on = budget is not None and budget > 0.0
+    out = np.array(
+        [budget or 0.0, spent, 1.0 / budget if on else 0.0, 0.0 if on else 1.0, weight or 0.0], dtype=float
+    )
+    assert out.size == TERMS
+    return out

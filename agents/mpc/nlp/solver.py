@@ -1,0 +1,441 @@
+"""Building the MPC's solver from the NLP of :mod:`agents.mpc.nlp.ocp`: options, rungs, caches.
+
+Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
+Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
+adaptive barrier, primal-dual warm start; IPOPT's "Solved To Acceptable Level" counts as a
+success). On the paper's 36 closed loops (``python -m benchmarks.timing``, 2 cores) fatrop took a
+median / p95 of 2.1 / 4.6 ms per RMPC step against IPOPT's 6.6 / 20 ms (IPOPT spends ~2.5 ms per
+call in MUMPS and its own set-up however small the problem), and 6.3 / 23 ms per exact-SMPC step
+against 7.2 / 41 ms, neither with a failed solve. The two may settle in different local optima.
+
+**Compiled solvers** (``jit=True``): the same NLP is assembled once more in MX with the stage
+functions (dynamics, pose cost, risk row) called rather than inlined, its functions (the NLP and
+the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGenerator`, compiled by
+``$CC`` (gcc) at ``-O{jit_opt}`` into a shared library in a private temporary directory and kept in
+``jit_cache`` under a hash of the NLP, so later processes load it; nlpsol then runs from the
+library (:mod:`agents.mpc.nlp.compiled`). Nothing is written to the working directory and the process never
+changes directory.
+
+**Rungs** (:meth:`SolverSettings.rung_limits`): each NLP is built with a few solvers that differ
+only in their limits (fatrop: ``max_iter``, halved per rung; IPOPT: ``max_wall_time``, halved per
+rung), so that a call can be made to fit the time left in a step (:mod:`agents.mpc.nlp.budget`). The
+smallest rung is built first and run on the scenario's start: its time per iteration is the prior
+of the budget's estimate, and fatrop rungs that could never fit twice the step's cap are left out.
+
+**Caches**: built problems are kept per process (:func:`cached_problem`, keyed by everything that
+changes the NLP or the solver), compiled libraries on disk.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+import warnings
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from agents.mpc.nlp.budget import CallTimes
+from agents.mpc.nlp.compiled import DEFAULT_JIT_CACHE, compiled_library, have_c_compiler
+from agents.mpc.nlp.ocp import (
+    EARLY_WEIGHT,
+    NU,
+    NX,
+    SOFT,
+    STAGE_COSTS,
+    Margin,
+    RiskValue,
+    assemble,
+    stage_functions,
+    variable_bounds,
+)
+from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
+from risk_env import checks
+from risk_env.models.path import project
+from risk_env.scenario.scenario import Scenario
+
+SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
+IPOPT_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+USEFUL_RUNG = 2.0
+"""A fatrop rung is built when its iterations at the prior time per iteration take at most this
+many step caps (a larger one could never fit the time left in a step)."""
+_CACHE_SIZE = 48
+_SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """How the NLP is solved; see :class:`agents.PathFollowingMPC` for each field."""
+
+    solver: str = "fatrop"
+    stage_cost: str = "reached"
+    jit: bool = False
+    jit_opt: int = 1
+    jit_cache: str | os.PathLike[str] | None = DEFAULT_JIT_CACHE
+    tol: float = 1e-4
+    max_iter: int = 150
+    warm_start: bool = True
+    solver_options: dict[str, Any] = field(default_factory=dict)
+    time_limit: float | None = None
+    """The wall-time cap of a step [s] (None: none): IPOPT's own ``max_wall_time`` at the largest
+    rung; for fatrop (no time limit) it decides which rungs are worth building."""
+    rungs: int = 1
+    """Rungs of the ladder: rung r limits a call to ``max_iter // 2**r`` iterations (fatrop) or
+    ``time_limit / 2**r`` seconds (IPOPT), so that a call fits the time left in a step."""
+    soft_penalty: float = 1e4
+    """rho of the soft variants' exact L1 penalty ``sum_n rho * EARLY_WEIGHT**(N - n) s_n`` [cost
+    per margin unit] (:mod:`agents.mpc.nlp.ocp`)."""
+
+    def __post_init__(self) -> None:
+        if self.solver not in SOLVERS:
+            raise ValueError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
+        if self.stage_cost not in STAGE_COSTS:
+            raise ValueError(f"unknown stage_cost {self.stage_cost!r}; expected one of {STAGE_COSTS}")
+        # numbers of any real type (numpy's too), stored as Python's
+        object.__setattr__(self, "max_iter", checks.integer("max_iter", self.max_iter, minimum=1))
+        object.__setattr__(self, "tol", checks.positive("tol", self.tol))
+        object.__setattr__(self, "rungs", checks.integer("rungs", self.rungs, minimum=1))
+        if self.time_limit is not None:
+            limit = checks.real("time_limit", self.time_limit)
+            if not limit > 0:
+                raise ValueError(f"time_limit must be > 0 [s] (or None), got {self.time_limit!r}")
+            object.__setattr__(self, "time_limit", limit)
+        object.__setattr__(self, "soft_penalty", checks.positive("soft_penalty", self.soft_penalty))
+
+    def key(self) -> tuple[Any, ...]:
+        """What of the settings changes a built solver (not where compiled code is kept)."""
+        options = repr(sorted(self.solver_options.items()))
+        return (
+            self.solver,
+            self.stage_cost,
+            self.jit,
+            self.jit_opt,
+            self.tol,
+            self.max_iter,
+            self.warm_start,
+            options,
+            self.time_limit,
+            self.rungs,
+            self.soft_penalty,
+        )
+
+    def rung_limits(self) -> tuple[tuple[int, float | None], ...]:
+        """``(max_iter, max_wall_time [s] or None)`` of each rung, the largest first."""
+        out = []
+        for r in range(self.rungs):
+            iterations = max(1, self.max_iter >> r) if self.solver == "fatrop" else self.max_iter
+            wall = None if self.time_limit is None or self.solver != "ipopt" else self.time_limit / 2**r
+            out.append((iterations, wall))
+        return tuple(out)
+
+    def plugin_options(self, rung: int = 0) -> dict[str, Any]:
+        """The nlpsol plugin's options (IPOPT's or fatrop's) at ``rung``, the user's on top."""
+        max_iter, wall = self.rung_limits()[rung]
+        extra = {k: v for k, v in self.solver_options.items() if k not in SOLVERS}
+        if self.solver == "ipopt":
+            ipopt = {
+                "print_level": 0,
+                "sb": "yes",
+                "tol": self.tol,
+                "constr_viol_tol": 1e-6,
+                "acceptable_tol": max(1e-3, 10 * self.tol),
+                "acceptable_constr_viol_tol": 1e-5,
+                "acceptable_iter": 5,
+                "max_iter": max_iter,
+                "mu_strategy": "adaptive",
+                "hessian_approximation": "exact",
+            }
+            if self.warm_start:
+                ipopt.update(
+                    warm_start_init_point="yes",
+                    warm_start_bound_push=1e-6,
+                    warm_start_mult_bound_push=1e-6,
+                    mu_init=1e-3,
+                )
+            if wall is not None:
+                ipopt["max_wall_time"] = wall
+            ipopt.update(self.solver_options.get("ipopt", {}))
+            return {"ipopt": ipopt, **extra}
+        # CasADi 3.8's fatrop takes a primal initial guess only (no warm_start_* options); a small
+        # initial barrier and bound push suit that guess, the shifted previous solution
+        fatrop = {
+            "print_level": 0,
+            "tol": self.tol,
+            "constr_viol_tol": 1e-6,
+            "max_iter": max_iter,
+            "mu_init": 1e-3 if self.warm_start else 1e-1,
+            "bound_push": 1e-6 if self.warm_start else 1e-2,
+            "bound_frac": 1e-6 if self.warm_start else 1e-2,
+        }
+        fatrop.update(self.solver_options.get("fatrop", {}))
+        return {"structure_detection": "auto", "fatrop": fatrop, **extra}
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One built NLP variant: the solver, an evaluator and the index maps of its layout."""
+
+    variant: str
+    solvers: tuple[ca.Function, ...]
+    """The solver at each rung of :meth:`SolverSettings.rung_limits`, the largest first."""
+    limits: tuple[tuple[int, float | None], ...]
+    """``(max_iter, max_wall_time [s] or None)`` of each rung."""
+    evaluate: ca.Function
+    """(w, p) -> (objective, g): scores initial-guess candidates."""
+    rollout: ca.Function
+    """(x_0 (NX,), inputs (NU, N)) -> states (NX, N): the model f, accumulated."""
+    beliefs: ca.Function
+    """object measurement (5,) -> (N+1, 11) belief fields at n = 0..N (``Belief.as_array`` order)."""
+    lbg: np.ndarray
+    ubg: np.ndarray
+    x_index: np.ndarray
+    """(N+1, NX) positions of the states in w."""
+    u_index: np.ndarray
+    """(N, NU) positions of the inputs in w."""
+    risk_rows: np.ndarray
+    """Rows of g holding the risk rows of n = 1..N (one per stage or one per object slot and stage)
+    and the budget's row (empty for ``"free"``)."""
+    row_slack: np.ndarray
+    """For each of :attr:`risk_rows`, the position of its slack in :attr:`slack_index` (a stage's
+    rows share one; empty for hard variants)."""
+    slack_index: np.ndarray
+    """Positions of the slacks s_n, n = 1..N (and the budget row's), in w (empty for hard
+    variants)."""
+    slack_costs: np.ndarray
+    """rho_n, the cost of each slack s_n, in the order of :attr:`slack_index` (empty for hard
+    variants)."""
+    w_tags: tuple[tuple[int, str, int], ...]
+    """(stage, kind, component) of every entry of w."""
+    shift_w: np.ndarray
+    """For each entry of w, the same entry one stage later (the last stage: itself)."""
+    g_tags: tuple[tuple[int, str, int], ...]
+    """(stage, kind, component) of every row of g: maps multipliers between variants and stages."""
+    build_time: float
+    """Seconds to build (and with jit compile) the solver."""
+    jit: bool
+    """Whether the solver's functions were compiled."""
+    times: CallTimes
+    """The rungs' limits and the measured time per iteration (shared by the cached copies)."""
+    acc_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
+    acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Rows of g of c_{n+1} = c_n + R_n, n = 0..N-1 (empty without a budget)."""
+
+    @property
+    def n_w(self) -> int:
+        return len(self.w_tags)
+
+    @property
+    def solver(self) -> ca.Function:
+        """The largest rung's solver."""
+        return self.solvers[0]
+
+    @property
+    def soft(self) -> bool:
+        return self.variant.endswith(SOFT)
+
+
+def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Problem:
+    """The process-wide problem under ``key``, built by ``build()`` on a miss (``build_time`` 0 on a
+    hit); the least recently used of more than 48 are dropped."""
+    if key in _SOLVER_CACHE:
+        _SOLVER_CACHE.move_to_end(key)
+        return replace(_SOLVER_CACHE[key], build_time=0.0)
+    problem = build()
+    _SOLVER_CACHE[key] = problem
+    while len(_SOLVER_CACHE) > _CACHE_SIZE:
+        _SOLVER_CACHE.popitem(last=False)
+    return problem
+
+
+def build_problem(
+    scenario: Scenario,
+    variant: str,
+    settings: SolverSettings,
+    margin: Margin,
+    risk_shape: tuple[int, int],
+    value: RiskValue | None = None,
+    terms: tuple[bool, bool] = (False, False),
+    slots: int = 1,
+) -> Problem:
+    """Build the NLP of :mod:`agents.mpc.nlp.ocp` for ``variant`` with ``slots`` object slots and its
+    solver (compiled with ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the
+    risk budget and weight (:func:`agents.mpc.nlp.ocp.assemble`)."""
+    t0 = time.perf_counter()
+    N = scenario.horizon
+    stages = stage_functions(scenario, variant, margin, risk_shape, value, slots)
+    # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
+    penalty = settings.soft_penalty if variant.endswith(SOFT) else None
+    nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots
+    )
+
+    base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
+    if settings.solver == "fatrop":
+        base["equality"] = [lo == hi for lo, hi in zip(lbg, ubg, strict=True)]
+    jit = settings.jit and have_c_compiler()
+    if settings.jit and not jit:
+        warnings.warn("jit=True but no C compiler was found: building without jit", stacklevel=5)
+    oracle: Any = nlp
+    if jit:
+        # the same NLP in MX, the stage functions called rather than inlined: the generated C
+        # code holds the risk row and its derivatives once instead of N times; every rung loads
+        # the one library, whose compiled "nlp" leaves nothing to expand
+        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots)
+        base["expand"] = False
+        library = compiled_library(
+            calls,
+            {**base, **settings.plugin_options(0)},
+            settings.solver,
+            settings.jit_opt,
+            settings.jit_cache,
+        )
+        jit = library is not None
+        oracle = library if jit else nlp
+        base["expand"] = not jit
+
+    derivatives: dict[str, ca.Function] = {}
+
+    def make(rung: int) -> ca.Function:
+        solver = ca.nlpsol(
+            "mpc", settings.solver, oracle, {**base, **derivatives, **settings.plugin_options(rung)}
+        )
+        if settings.solver == "ipopt" and not jit and not derivatives:  # IPOPT's rungs share them
+            names = {"grad_f": "nlp_grad_f", "jac_g": "nlp_jac_g", "hess_lag": "nlp_hess_l"}
+            derivatives.update({k: solver.get_function(v) for k, v in names.items()})
+        return solver
+
+    # the smallest rung first: its time per iteration on the scenario's start is the prior, which
+    # leaves out the larger fatrop rungs that could never fit in the cap
+    ladder = settings.rung_limits()
+    smallest = make(len(ladder) - 1)
+    index = {tag: i for i, tag in enumerate(w_tags)}
+    x_index = np.array([[index[(n, "x", i)] for i in range(NX)] for n in range(N + 1)])
+    u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
+    slack_index = np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int)
+    layout = (x_index, u_index, lbg, ubg, risk_shape, slack_index, slots)
+    prior, failing = iteration_times(smallest, scenario, *layout)
+    cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
+    rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
+    solvers = [make(r) for r in rungs] + [smallest]
+    limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
+
+    risk_rows = [i for i, tag in enumerate(g_tags) if tag[1] in ("risk", "budget")]
+    slacks = {tag: j for j, tag in enumerate(tag for tag in w_tags if tag[1] == "s")}
+    # the slack of each risk row: its stage's (n, "s", 0), the budget row's (N, "s", 1)
+    row_slack = np.array(
+        [slacks.get((g_tags[i][0], "s", int(g_tags[i][1] == "budget")), -1) for i in risk_rows], dtype=int
+    )
+    if not slacks:
+        row_slack = np.zeros(0, dtype=int)
+    return Problem(
+        variant=variant,
+        solvers=tuple(solvers),
+        limits=limits,
+        evaluate=ca.Function("evaluate", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]),
+        rollout=stages["f"].mapaccum(N),
+        beliefs=belief_fn,
+        lbg=np.array(lbg),
+        ubg=np.array(ubg),
+        x_index=x_index,
+        u_index=u_index,
+        risk_rows=np.array(risk_rows, dtype=int),
+        row_slack=row_slack,
+        slack_index=slack_index,
+        slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
+        w_tags=tuple(w_tags),
+        shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
+        g_tags=tuple(g_tags),
+        build_time=time.perf_counter() - t0,
+        jit=jit,
+        times=CallTimes(limits, prior, failing),
+        acc_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "c"], dtype=int),
+        acc_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "accumulate"], dtype=int),
+    )
+
+
+def iteration_time(
+    solver: ca.Function,
+    scenario: Scenario,
+    x_index: np.ndarray,
+    u_index: np.ndarray,
+    lbg: list[float],
+    ubg: list[float],
+    risk_shape: tuple[int, int],
+    slack_index: np.ndarray,
+    slots: int = 1,
+    repeats: int = 2,
+) -> float:
+    """The time of one solver iteration [s] on the scenario's start (its objects in the first
+    slots, all active, the rest absent; epsilon; zero risk data) from rest: the fastest of
+    ``repeats`` calls (the first also pays one-time set-up).
+
+    The bounds have the steps' pattern (which entries are fixed, which infinite; the slacks >= 0):
+    CasADi 3.8's fatrop splits the bounds into equalities and inequalities at every call, and once a
+    solver was called with another split, its later calls ignore ``max_iter`` and run on with
+    fatrop's default options."""
+    N, n_w = scenario.horizon, solver.size_in("x0")[0]
+    x, y, theta = scenario.ego.start.as_tuple()
+    x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
+    measurements = np.zeros((slots, 5))
+    active = np.zeros(slots)
+    for k, obj in enumerate(scenario.objects[:slots]):
+        measurements[k] = (*obj.start.as_tuple(), obj.speed, obj.turn_rate)
+        active[k] = 1.0
+    rows = risk_shape[0] * slots
+    data = np.zeros((N, rows, risk_shape[1] if rows else 0))
+    numbers = slot_numbers(scenario, slots)
+    p = parameter_vector(scenario.risk_tolerance, scenario.ego.v_ref, measurements, active, numbers, data)
+    p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
+    lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0, slack_index)
+    w0 = np.zeros(n_w)
+    w0[x_index] = x0
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        with np.errstate(all="ignore"):
+            solver(x0=w0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=p)
+        iterations = int(solver.stats().get("iter_count", 0))
+        if iterations > 0:
+            best = min(best, (time.perf_counter() - t0) / iterations)
+    return best if math.isfinite(best) else 1e-3
+
+
+def iteration_times(solver: ca.Function, scenario: Scenario, *layout: Any) -> tuple[float, float]:
+    """The priors of :class:`agents.mpc.nlp.budget.CallTimes`: the time per iteration [s] of ``solver``
+    on the scenario's start, and on the same start with a parked object 1 m ahead of the ego,
+    inside its boxes at every step (a failing call's, whose line searches evaluate more)."""
+    x, y, theta = scenario.ego.start.as_tuple()
+    swallowed = scenario.replace(
+        object_start=(x + math.cos(theta), y + math.sin(theta), theta), object_speed=0.0, object_turn_rate=0.0
+    )
+    return iteration_time(solver, scenario, *layout), iteration_time(solver, swallowed, *layout)
+
+
+def call_solver(
+    problem: Problem, args: dict[str, Any], solver: str, rung: int = 0
+) -> tuple[dict[str, np.ndarray], str, bool, int, dict[str, float]]:
+    """One solver call at ``rung``: ``(outputs, status, success, iterations, wall times)``; never
+    raises."""
+    function = problem.solvers[rung]
+    try:
+        with np.errstate(all="ignore"):
+            res = function(**args)
+        stats = function.stats()
+    except Exception as err:  # never raise inside an episode
+        return {}, f"exception: {err}", False, 0, {}
+    out = {k: np.asarray(v).ravel() for k, v in res.items()}
+    if solver == "ipopt":
+        status = str(stats.get("return_status", "unknown"))
+        ok = status in IPOPT_SUCCESS
+    else:
+        status = str(stats.get("unified_return_status", stats.get("return_status", "unknown")))
+        ok = bool(stats.get("success", False))
+    ok = ok and all(np.all(np.isfinite(out[k])) for k in ("x", "lam_x", "lam_g", "f"))
+    times = {k: float(v) for k, v in stats.items() if k.startswith("t_wall_") and v}
+    return out, status, ok, int(stats.get("iter_count", 0)), times

@@ -1,0 +1,166 @@
+"""The object's prediction over the horizon (paper Sec. VI-C, the truncation centred on the predicted mean).
+
+From a measurement ``(c1, c2, theta, v, omega)`` the mean follows the unicycle with the measured,
+constant inputs. At step n the position and the speed are independent truncated Gaussians:
+
+- position: mean_n, standard deviations ``sigma0 + n Q`` (c1, c2), truncated to the box
+  ``mean_n +- (box_half_width0 + n Delta)``;
+- speed: mean v, standard deviation ``sigma0_v + n Q_v``, truncated to
+  ``[v_lo0 - n Delta_v, v_hi0 + n Delta_v]``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from risk_env.models.dynamics import unicycle_step
+from risk_env.models.ops import NUMPY, Ops
+from risk_env.models.truncnorm import sample as truncnorm_sample
+from risk_env.models.truncnorm import transform as truncnorm_transform
+from risk_env.scenario.scenario import Scenario, Uncertainty
+
+
+@dataclass(frozen=True)
+class Belief:
+    """The object's distribution at one or more prediction steps; fields broadcast together.
+
+    Each field is a float or an array (numpy) or a scalar expression (CasADi).
+    """
+
+    x: Any
+    """Mean c1 [m]."""
+    y: Any
+    """Mean c2 [m]."""
+    theta: Any
+    """Mean heading [rad] (deterministic)."""
+    speed: Any
+    """Mean speed [m/s]."""
+    sigma_x: Any
+    """Standard deviation of c1 [m]."""
+    sigma_y: Any
+    """Standard deviation of c2 [m]."""
+    sigma_v: Any
+    """Standard deviation of the speed [m/s]."""
+    half_x: Any
+    """Half width of the c1 truncation interval around the mean [m]."""
+    half_y: Any
+    """Half width of the c2 truncation interval around the mean [m]."""
+    v_lo: Any
+    """Lower speed truncation bound [m/s]."""
+    v_hi: Any
+    """Upper speed truncation bound [m/s]."""
+
+    SIZE = 11
+
+    def as_array(self) -> np.ndarray:
+        """The fields stacked on a last axis: ``(..., 11)``."""
+        return np.stack(
+            np.broadcast_arrays(*(np.asarray(getattr(self, f.name), float) for f in fields(self))),
+            -1,
+        )
+
+    @classmethod
+    def from_array(cls, a: Any) -> Belief:
+        """Inverse of :meth:`as_array`; also takes a CasADi vector of 11 entries."""
+        if isinstance(a, np.ndarray):
+            return cls(*(a[..., i] for i in range(cls.SIZE)))
+        return cls(*(a[i] for i in range(cls.SIZE)))
+
+    def __getitem__(self, index: Any) -> Belief:
+        """Index every (numpy) field alike, e.g. ``belief[n]`` for prediction step n."""
+        return Belief(*(np.asarray(getattr(self, f.name))[index] for f in fields(self)))
+
+    def sample(self, rng: np.random.Generator, size: int | tuple[int, ...] = ()) -> np.ndarray:
+        """Draws ``(size..., batch..., 3)`` of (c1 [m], c2 [m], v [m/s]) from ``rng``."""
+        size = (size,) if isinstance(size, int) else tuple(size)
+        return truncnorm_sample(*self._marginals(), rng, size)
+
+    def from_uniforms(self, u: Any, ops: Ops = NUMPY) -> Any:
+        """The draws :meth:`sample` makes from the uniforms on [0, 1): ``u (..., batch..., 3)``
+        -> ``(..., batch..., 3)`` (numpy), or 3 floats -> a list of 3 (:data:`~risk_env.models.ops.MATH`)."""
+        mean, sigma, lo, hi = self._marginals(ops)
+        return ops.elementwise(lambda *args: truncnorm_transform(*args, ops), u, mean, sigma, lo, hi)
+
+    def _marginals(self, ops: Ops = NUMPY) -> tuple[Any, Any, Any, Any]:
+        """Mean, sigma, lower and upper bound of (c1, c2, v), each ``(batch..., 3)`` (a list of
+        3 with :data:`~risk_env.models.ops.MATH`)."""
+        mean = ops.stack([self.x, self.y, self.speed])
+        sigma = ops.stack([self.sigma_x, self.sigma_y, self.sigma_v])
+        lo = ops.stack([self.x - self.half_x, self.y - self.half_y, self.v_lo])
+        hi = ops.stack([self.x + self.half_x, self.y + self.half_y, self.v_hi])
+        return mean, sigma, lo, hi
+
+
+def predict(
+    scenario: Scenario,
+    measurement: Any,
+    steps: int | None = None,
+    ops: Ops = NUMPY,
+    uncertainty: Any = None,
+) -> list[Belief]:
+    """Beliefs for n = 0..steps (default: the horizon N) from ``measurement``.
+
+    ``measurement``: ``(c1 [m], c2 [m], theta [rad], v [m/s], omega [rad/s])``, a sequence of
+    5 floats, arrays (batched) or CasADi scalars. ``uncertainty``: the scenario's unless given,
+    any object with the fields of :class:`~risk_env.scenario.scenario.Uncertainty` (the MPC passes CasADi
+    parameters, so that one built solver serves every uncertainty level).
+    """
+    steps = scenario.horizon if steps is None else steps
+    u = scenario.uncertainty if uncertainty is None else uncertainty
+    x, y, th, v, w = (measurement[i] for i in range(5))
+    out = []
+    for n in range(steps + 1):
+        if n > 0:
+            x, y, th = unicycle_step(x, y, th, v, w, scenario.dt, ops)
+        out.append(_belief(u, n, x, y, th, v))
+    return out
+
+
+def predict_step(
+    scenario: Scenario, measurement: Any, step: int = 1, ops: Ops = NUMPY, uncertainty: Any = None
+) -> Belief:
+    """``predict(scenario, measurement, step, ops, uncertainty)[step]`` alone: the belief at one
+    prediction step (the env's B at ``step=1``), without building the others."""
+    x, y, th, v, w = measurement
+    for _ in range(step):
+        x, y, th = unicycle_step(x, y, th, v, w, scenario.dt, ops)
+    return _belief(scenario.uncertainty if uncertainty is None else uncertainty, step, x, y, th, v)
+
+
+def _belief(u: Any, n: int, x: Any, y: Any, th: Any, v: Any) -> Belief:
+    """The belief at prediction step ``n`` around the mean ``(x, y, th, v)``; spreads of ``u``."""
+    if isinstance(u, Uncertainty):  # numbers: the spreads once per (u, n), a lean constructor
+        belief = object.__new__(Belief)
+        belief.__dict__.update(x=x, y=y, theta=th, speed=v, **_spreads(u, n))
+        return belief
+    return Belief(x, y, th, v, **_spread_formulas(u, n))
+
+
+def _spread_formulas(u: Any, n: int) -> dict[str, Any]:
+    """Standard deviations and truncation bounds at step ``n`` (paper Sec. VI-C, Table I)."""
+    return {
+        "sigma_x": u.sigma0[0] + n * u.sigma_growth[0],
+        "sigma_y": u.sigma0[1] + n * u.sigma_growth[1],
+        "sigma_v": u.sigma0[2] + n * u.sigma_growth[2],
+        "half_x": u.box_half_width0[0] + n * u.box_growth[0],
+        "half_y": u.box_half_width0[1] + n * u.box_growth[1],
+        "v_lo": u.velocity_bounds0[0] - n * u.box_growth[2],
+        "v_hi": u.velocity_bounds0[1] + n * u.box_growth[2],
+    }
+
+
+@functools.lru_cache(maxsize=256)
+def _spreads(u: Uncertainty, n: int) -> dict[str, float]:
+    return _spread_formulas(u, n)
+
+
+def predict_array(
+    scenario: Scenario, measurement: np.ndarray, steps: int | None = None, uncertainty: Any = None
+) -> Belief:
+    """numpy convenience: one :class:`Belief` whose fields have a leading step axis ``(steps+1, ...)``."""
+    beliefs = predict(scenario, np.asarray(measurement, float).T, steps, uncertainty=uncertainty)
+    return Belief.from_array(np.stack([b.as_array() for b in beliefs]))
