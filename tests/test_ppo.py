@@ -166,10 +166,13 @@ def _train(tmp_path: Path, *flags: str, steps: int = 1024) -> dict:
 
 
 def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
-    """One short training (with the prediction features): saved, loaded, acting; told epsilon and
-    the level of the scenario it is loaded for, in the severity it was trained with."""
-    meta = _train(tmp_path, "--checkpoint-every", "512", "--prediction")
+    """One short training (the prediction features, the Lagrangian): saved, loaded, acting; told
+    epsilon and the level of the scenario it is loaded for, in the severity it was trained with.
+    The cost is above the limit, so beta grows by dual ascent (two rollouts, one update each)."""
+    lagrangian = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
+    meta = _train(tmp_path, "--checkpoint-every", "512", "--prediction", *lagrangian)
     assert meta["timesteps"] >= 1024 and meta["steps_per_s"] > 0
+    assert meta["final_rollout"]["beta"] > 2.0 + 1.0  # each update adds dual_lr (cost - limit) >= 1
     assert meta["features"] == FeatureSpec(prediction=True).size
     assert list((tmp_path / "ppo" / "model_checkpoints").glob("model_*_steps.zip"))
     agent = PPOAgent.load(tmp_path / "ppo" / "model.zip")
@@ -189,6 +192,7 @@ def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
         PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
 
 
+@pytest.mark.slow  # test_train_save_load_predict_in_a_subprocess trains with the same flags
 def test_lagrangian_raises_beta_above_the_cost_limit(tmp_path: Path) -> None:
     """One rollout (beta moves after every rollout): the cost is above the limit, the penalty grows."""
     flags = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")

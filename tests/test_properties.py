@@ -461,7 +461,7 @@ def agents_on_observations(name: str, case: tuple[Scenario, list[np.ndarray]]) -
 
 AGENT_NAMES = st.sampled_from(sorted(AGENTS))
 CLOSED_LOOPS = given(name=AGENT_NAMES, scenario=scenarios(max_steps=6, horizon=3), seed=st.integers(0, 2**16))
-test_agents_act_within_limits_in_closed_loop = fuzz(8)(CLOSED_LOOPS(agents_in_closed_loop))
+test_agents_act_within_limits_in_closed_loop = fuzz(6)(CLOSED_LOOPS(agents_in_closed_loop))
 test_agents_act_within_limits_on_fuzzed_observations = fuzz(8)(
     given(name=AGENT_NAMES, case=agent_observations())(agents_on_observations)
 )
