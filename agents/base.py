@@ -99,7 +99,7 @@ class SolveReport:
 
     @property
     def risk(self) -> np.ndarray:
-        """Predicted risk ``(N,)`` at the states n = 1..N with speed v_{n-1}, re-evaluated by the
+        r"""Predicted risk ``(N,)`` at the states $n = 1, \dots, N$ with speed $v_{n-1}$, re-evaluated by the
         numpy estimator that the constraint uses (Monte Carlo: the same draws, hard indicator).
         Computed on first access, outside :attr:`solve_time`."""
         if self._risk is None:

@@ -1,4 +1,4 @@
-"""One way to name an agent, in every command and every result table.
+r"""One way to name an agent, in every command and every result table.
 
 The grammar (parts separated by colons; brackets: optional)::
 
@@ -8,7 +8,7 @@ The grammar (parts separated by colons; brackets: optional)::
     idm                                          highway-env's IDM driver (highway commands)
 
 ``SEVERITY`` is one of :data:`risk_env.scenario.SEVERITY_NAMES` and ``TOLERANCE`` the per-step
-bound epsilon in that severity's own unit (J, probability, injuries); ``budget=B`` gives the SMPC
+bound $\epsilon$ in that severity's own unit (J, probability, injuries); ``budget=B`` gives the SMPC
 an episode risk budget (``risk_budget=B``, :mod:`agents.mpc.nlp.risk_budget`), with no per-step bound
 unless a tolerance is given too. A command that sweeps the tolerance itself (``table2``,
 ``sampled``, ``timing``) takes agents without one. Lists are comma-separated:
@@ -69,7 +69,7 @@ class AgentName:
     severity: str | None = None
     """The SMPC's severity (None: the command's)."""
     tolerance: float | None = None
-    """The SMPC's per-step bound epsilon in the severity's unit (None: the command's)."""
+    r"""The SMPC's per-step bound $\epsilon$ in the severity's unit (None: the command's)."""
     budget: float | None = None
     """The SMPC's episode risk budget B (None: none)."""
 

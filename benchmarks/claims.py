@@ -1,7 +1,7 @@
-"""The paper's claims (Sec. VIII), checked on Table II runs (:func:`check_claims`).
+r"""The paper's claims (Sec. VIII), checked on Table II runs (:func:`check_claims`).
 
 A comparison says "lower" only where one value is strictly lower, and names ties as ties (the
-exact SMPC at epsilon = 0 is the RMPC: P = 0 is the box, so the two runs are the same).
+exact SMPC at $\epsilon = 0$ is the RMPC: $P = 0$ is the box, so the two runs are the same).
 """
 
 from __future__ import annotations

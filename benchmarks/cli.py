@@ -25,6 +25,22 @@ from benchmarks.output import OutputError, OutputSet
 _ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
 _LITERAL = re.compile(r"``([^`]+)``")
 _STRONG = re.compile(r"\*\*([^*]+)\*\*")
+_MATHS = re.compile(r"\$\$?([^$]+)\$\$?")
+_TEX_SYMBOLS = {
+    "le": "<=",
+    "ge": ">=",
+    "pm": "+-",
+    "to": "->",
+    "cdot": "*",
+    "times": "x",
+    "dots": "...",
+    "in": "in",
+}
+_TEX_COMMAND = re.compile(r"\\([A-Za-z]+|[,;!| {}_])")
+_TEX_TEXT = re.compile(r"\\(?:mathrm|text|mathbf|operatorname)\{([^{}]*)\}")
+_TEX_FRACTION = re.compile(r"\\frac\{([^{}]*)\}\{([^{}]*)\}")
+_TEX_ROOT = re.compile(r"\\sqrt\{([^{}]*)\}")
+_TEX_GROUP = re.compile(r"(?<![_^\\])\{([^{}]*)(?<!\\)\}")
 
 
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
@@ -41,8 +57,32 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
         return super()._get_help_string(action)
 
 
+def plain_maths(tex: str) -> str:
+    r"""A formula of the docs (the TeX between ``$`` signs) as a terminal shows it: commands become
+    their names or symbols (``\epsilon`` becomes epsilon, ``\le`` becomes <=), fractions and roots
+    are written out, braces go except around a subscript or power of several characters."""
+
+    def command(match: re.Match[str]) -> str:
+        name = match.group(1)
+        if name in "|{}_":
+            return "||" if name == "|" else name
+        return _TEX_SYMBOLS.get(name, name) if name.isalpha() else " "
+
+    def part(text: str) -> str:
+        return text if re.fullmatch(r"[\w\\]+", text) else f"({text})"
+
+    tex = _TEX_FRACTION.sub(lambda m: f"{part(m.group(1))}/{part(m.group(2))}", _TEX_TEXT.sub(r"\1", tex))
+    tex = _TEX_ROOT.sub(r"sqrt(\1)", tex)
+    while _TEX_GROUP.search(tex):
+        tex = _TEX_GROUP.sub(r"\1", tex)
+    tex = re.sub(r"([_^])\{(\w)\}", r"\1\2", tex)  # x_{k} -> x_k; x_{k+1} stays
+    return _TEX_COMMAND.sub(command, tex)
+
+
 def plain(text: str) -> str:
-    """``text`` without reStructuredText markup (roles, double back quotes, bold), wrapped to 90."""
+    """``text`` without reStructuredText markup (roles, double back quotes, bold) and with its maths
+    as plain text (:func:`plain_maths`), wrapped to 90."""
+    text = _MATHS.sub(lambda m: plain_maths(m.group(1)), text)
     text = _ROLE.sub(lambda m: m.group(1), text)
     text = _LITERAL.sub(r"\1", text)
     text = _STRONG.sub(r"\1", text)

@@ -41,7 +41,7 @@ from risk_env.risk.estimators import signed_box_distance
 REFERENCES = ("CartPole-v1", "Pendulum-v1")
 """Gymnasium's classic-control envs our step is measured against."""
 TARGETS = {"exact": 3.0, "(no risk)": 2.0}
-"""Issue 15's targets: at most this many Pendulum-v1 steps per RiskCrossing-v0 step."""
+"""The speed bounds the report checks: at most this many Pendulum-v1 steps per RiskCrossing-v0 step."""
 
 
 def best_time(fn: Callable[[], object], number: int, repeat: int) -> float:

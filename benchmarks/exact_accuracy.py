@@ -1,4 +1,4 @@
-"""How exact is the exact risk? Its disc probability against nested adaptive quadrature, on random
+r"""How exact is the exact risk? Its disc probability against nested adaptive quadrature, on random
 beliefs of any aspect ratio and rotation.
 
     python -m benchmarks.exact_accuracy --beliefs 1000
@@ -9,18 +9,19 @@ the aspect ratio 1 (a sixth of them) or log-uniform up to 1:1000 (either axis th
 half widths 0.05 to 15 standard deviations (a tenth untruncated), a random frame angle. The ego
 offset is one of four kinds in turn: anywhere the disc may meet the box, the disc's edge through
 a likely point of the belief, the disc's edge near a box corner, the mean inside the disc. The
-collision distance is the scenario's r = 3 m; with the severity ``probability`` R is P.
+collision distance is the scenario's $r$ = 3 m; with the severity ``probability`` $R$ is $P$.
 
 The reference (:func:`reference_probability`) integrates the truncated density over the disc in
 the belief's frame, from the generated offset (not the estimator's rotation): scipy's adaptive
-``quad`` over one axis, the other in closed form with Phi, split at the box edges, at multiples
+``quad`` over one axis, the other in closed form with $\Phi$, split at the box edges, at multiples
 of both axes' standard deviations and where the chord's ends cross them. Integrated in both
 orders; their largest disagreement is printed as the reference's own accuracy.
 
 Printed per path of the estimator (the env's numpy batch and scalar kernels, the generic numpy
 form, the SMPC's CasADi form :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`): the largest absolute
 error, the largest shortfall below the reference (the unsafe side) and how many fall short by more
-than 1e-5. Targets: at most 1e-4 absolute, never short by more than 1e-5.
+than 1e-5. The last line checks the rule against its bounds: at most 1e-4 absolute, never short by
+more than 1e-5.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from risk_env.risk import ExactRisk
 from risk_env.risk.disc import disc_probability, signed_box_distance
 
 RADIUS = Scenario().collision_distance
-"""r = r_e + r_o [m]: the scenario's."""
+"""$r = r_e + r_o$ [m]: the scenario's."""
 ABS_TARGET = 1e-4
 """Largest absolute error of P allowed."""
 SHORT_TARGET = 1e-5
@@ -113,9 +114,10 @@ def _order(dx: float, dy: float, r: float, sx: float, sy: float, hx: float, hy: 
 def reference_probability(
     dx: float, dy: float, r: float, sx: float, sy: float, hx: float, hy: float
 ) -> tuple[float, float]:
-    """P(||d - z|| <= r) for z ~ N(0, diag(sx^2, sy^2)) truncated to ``[-hx, hx] x [-hy, hy]``,
-    ``(dx, dy)`` in the belief's frame [m], by nested adaptive quadrature in both orders:
-    ``(P, disagreement of the two orders)`` (P from the order whose outer axis is the narrower)."""
+    r"""$P(\|d - z\| \le r)$ for $z \sim N(0, \mathrm{diag}(s_x^2, s_y^2))$ truncated to
+    $[-h_x, h_x] \times [-h_y, h_y]$, ``(dx, dy)`` in the belief's frame [m], by nested adaptive
+    quadrature in both orders: ``(P, disagreement of the two orders)`` ($P$ from the order whose outer
+    axis is the narrower)."""
     a = _order(dx, dy, r, sx, sy, hx, hy)
     b = _order(dy, dx, r, sy, sx, hy, hx)
     return (a if sx <= sy else b), abs(a - b)

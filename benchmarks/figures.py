@@ -236,7 +236,7 @@ def velocities(
 
 
 def at_a_glance(rows: list[dict[str, Any]], out: Path) -> Path:
-    """Table II at a glance: d_min and e_acc over epsilon, ours (lines) beside the paper's (hollow)."""
+    r"""Table II at a glance: d_min and e_acc over $\epsilon$, ours (lines) beside the paper's (hollow)."""
     methods = [m for m in ("RMPC", "SMPC") if any(r["method"] == m for r in rows)]
     method_style = {"RMPC": "--", "SMPC": "-"}
     fig, axes = plt.subplots(1, 2, figsize=(10.5, 3.9), layout="constrained")

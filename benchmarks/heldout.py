@@ -1,4 +1,4 @@
-"""Held-out two-object scenes: do the RMPC and the SMPC at epsilon = 0 keep clear of two road users
+r"""Held-out two-object scenes: do the RMPC and the SMPC at $\epsilon = 0$ keep clear of two road users
 in crossings they were not tuned on?
 
     python -m benchmarks.heldout --scenes 4 --workers 1                 # a quick look
@@ -9,18 +9,18 @@ The agents were developed on the paper's scene and the ``two_crossing`` preset
 reproducible from ``(seed, index)``, a prefix of a larger run is the smaller run) that draws, per
 scene:
 
-- the uncertainty level (the paper's presets in turn: low, medium, high), v_ref uniform in
+- the uncertainty level (the paper's presets in turn: low, medium, high), $v_{ref}$ uniform in
   [2, 6] m/s, the object motion (``"paper"`` or ``"sampled"``, the env's own draws from the
   prediction), the ego at the paper's start at rest;
 - two crossing road users, each from either side of the path (independently), heading across it
   within 0.4 rad of the perpendicular, at 1-4 m/s, timed to reach the path 2-12 s ahead at an
-  arc length where the ego would be then (within 0.5-1.3 of v_ref times that time, and at least
+  arc length where the ego would be then (within 0.5-1.3 of $v_{ref}$ times that time, and at least
   :data:`MIN_AHEAD` metres ahead of the ego's start), starting at least :data:`MIN_START` metres
   from the path.
 
 The objects start far enough from the ego that the first step is feasible, so every collision
 would be the agents' own. Per agent (named as in every command, :mod:`benchmarks.agent_names`;
-``rmpc``: worst case; ``smpc``: exact risk, epsilon = 0 in the paper's severity unless it names
+``rmpc``: worst case; ``smpc``: exact risk, $\epsilon = 0$ in the paper's severity unless it names
 its own) the benchmark reports collisions (with a Wilson 95 % interval), goal rate, steps, fallbacks per
 episode and failed solver calls, and the smallest distance to either object. Episodes run without the
 MPC's wall-time cap by default (``--max-solve-time inf``: results independent of the machine's
@@ -54,7 +54,7 @@ FILES = ("heldout.csv", "heldout.md")
 
 
 def agent(name: str) -> AgentName:
-    """The agent ``name`` (an SMPC without a tolerance: epsilon = 0, the paper's severity)."""
+    r"""The agent ``name`` (an SMPC without a tolerance: $\epsilon = 0$, the paper's severity)."""
     return parse_agent(name, ("rmpc", "smpc")).with_defaults("paper", 0.0)
 
 
@@ -90,7 +90,7 @@ class Scene:
     seed: int
 
     def scenario(self, risk_tolerance: float = 0.0, severity: str = "paper") -> Scenario:
-        """The scene's scenario (epsilon ``risk_tolerance`` in the unit of ``severity``)."""
+        r"""The scene's scenario ($\epsilon$ = ``risk_tolerance`` in the unit of ``severity``)."""
         objects = [{"start": start, "speed": speed, "turn_rate": 1e-4} for start, speed in self.objects]
         return Scenario.preset(
             self.uncertainty,

@@ -1,6 +1,6 @@
 """The paper's Table II (Tolksdorf et al., IEEE IV 2023), for side-by-side comparison.
 
-``PAPER[(method, uncertainty, epsilon)] = (e_acc, d_min)``; d_min = 3.0 in the paper means "> 3".
+``PAPER[(method, uncertainty, epsilon)] = (e_acc, d_min)``; d_min = 3.0 in the paper means $> 3$.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""Score a trained PPO policy fast on the batched env, and summarise several seeds.
+r"""Score a trained PPO policy fast on the batched env, and summarise several seeds.
 
 :func:`evaluate` runs seeded episodes of the paper's scenario with sampled object motion (as
-``benchmarks.sampled`` does, but 64 at a time in the batched env): episode i has seed
-``seed + i``. :func:`seed_table` gives mean +- std over training seeds as Markdown.
+``benchmarks.sampled`` does, but 64 at a time in the batched env): episode $i$ has seed
+``seed + i``. :func:`seed_table` gives mean $\pm$ std over training seeds as Markdown.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ def evaluate(
     seed: int = 0,
     batch: int = 64,
 ) -> dict[str, float]:
-    """Mean e_acc (sum_k ||e_k||, k = 0..steps), collision and goal rates, the PPO cost per episode
+    r"""Mean e_acc ($\sum_k \|e_k\|$, $k = 0, \dots,$ steps), collision and goal rates, the PPO cost per
+    episode
     (:class:`agents.ppo.training.RewardWeights` with the policy's saved weights) and d_min [m] of
     ``episodes`` deterministic episodes of the policy at ``path`` (in the scene it was trained on)."""
     import json
@@ -77,7 +78,7 @@ def evaluate(
 
 
 def seed_table(results: dict[int, dict[str, float]], best: int, header: str) -> str:
-    """Markdown: one row per seed and the mean +- std (sample std, ddof 1) over seeds."""
+    r"""Markdown: one row per seed and the mean $\pm$ std (sample std, ddof 1) over seeds."""
     lines = [header, "", "| seed | " + " | ".join(METRICS) + " |", "| --- |" + " --- |" * len(METRICS)]
     for s, r in results.items():
         mark = " (shipped)" if s == best else ""

@@ -1,5 +1,5 @@
-"""What a PPO training run of :mod:`benchmarks.train_ppo` is made of: the wrapper stack it trains
-on (:func:`make_env`) and the callbacks that log its risk and adapt beta (:func:`make_callbacks`).
+r"""What a PPO training run of :mod:`benchmarks.train_ppo` is made of: the wrapper stack it trains
+on (:func:`make_env`) and the callbacks that log its risk and adapt $\beta$ (:func:`make_callbacks`).
 ``args`` is a :class:`benchmarks.train_ppo.Args`."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ def levels(args: Any) -> list[str]:
 
 
 def tolerances(args: Any) -> list[float]:
-    """The epsilons of ``--tolerances``."""
+    r"""The $\epsilon$ values of ``--tolerances``."""
     return [float(t) for t in cli.comma_list(args.tolerances)]
 
 
@@ -35,8 +35,8 @@ def feature_spec(args: Any, dt: float) -> Any:
 
 
 def make_env(args: Any) -> Any:
-    """The wrapper stack: batched RiskCrossing-v0 copies split over the levels (LevelMix) ->
-    PolicyView (features, epsilon per episode, the PPO reward) -> SB3 VecEnv -> VecMonitor
+    r"""The wrapper stack: batched RiskCrossing-v0 copies split over the levels (LevelMix) ->
+    PolicyView (features, $\epsilon$ per episode, the PPO reward) -> SB3 VecEnv -> VecMonitor
     (episode return, length, cost, collision, success) -> VecNormalize (rewards only)."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -69,12 +69,12 @@ def make_env(args: Any) -> Any:
 
 
 def make_callbacks(args: Any) -> list[Any]:
-    """Episode statistics (and beta's dual ascent with --lagrangian), checkpoints, progress bar."""
+    r"""Episode statistics (and $\beta$'s dual ascent with --lagrangian), checkpoints, progress bar."""
     from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, ProgressBarCallback
 
     class RiskStats(BaseCallback):
-        """Logs the episodes finished in each rollout: cost, collision and goal rates, beta; with
-        ``lagrangian`` it then steps beta toward the cost limit (dual ascent)."""
+        r"""Logs the episodes finished in each rollout: cost, collision and goal rates, $\beta$; with
+        ``lagrangian`` it then steps $\beta$ toward the cost limit (dual ascent)."""
 
         def __init__(self) -> None:
             super().__init__()

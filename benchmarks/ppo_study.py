@@ -1,9 +1,9 @@
-"""The study behind the PPO reward weights and the prediction features: short training runs of a
-few settings, each scored on sampled motion at medium uncertainty, epsilon 0 and 2500 J.
+r"""The study behind the PPO reward weights and the prediction features: short training runs of a
+few settings, each scored on sampled motion at medium uncertainty, $\epsilon$ = 0 and 2500 J.
 
     python -m benchmarks.ppo_study --total-timesteps 1500000 --out docs/results/ppo_study
 
-Writes ``OUT/study.md`` (one row per setting and epsilon) and ``OUT/study.json``; the models go to
+Writes ``OUT/study.md`` (one row per setting and $\epsilon$) and ``OUT/study.json``; the models go to
 ``OUT/models`` (not committed). One output set (:mod:`benchmarks.output`): ``--resume`` keeps the
 settings an interrupted run finished.
 """
@@ -35,7 +35,7 @@ SETTINGS: dict[str, list[str]] = {
 """Setting name -> the train_ppo flags that make it (beside --total-timesteps and --seed); every
 setting trains with --risk-weight 300 and the other defaults of train_ppo."""
 EPSILONS = (0.0, 2500.0)
-"""epsilon of the evaluations [J]."""
+r"""$\epsilon$ of the evaluations [J]."""
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -83,9 +83,9 @@ class EpisodeRecord:
     actions: np.ndarray
     """(steps, 2) applied (v [m/s], omega [rad/s])."""
     risk: np.ndarray
-    """(steps,) R_{k+1|k} as the env reported it."""
+    """(steps,) $R_{k+1|k}$ as the env reported it."""
     path_error: np.ndarray
-    """(steps+1, 4) e_k, the first at the start state."""
+    """(steps+1, 4) $e_k$, the first at the start state."""
     distance: np.ndarray
     """(steps+1,) centre distance ego-object [m], the nearest object's."""
     solve_time: np.ndarray
@@ -104,7 +104,7 @@ class EpisodeRecord:
     objects: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 4)))
     """(steps+1, M, 4) every object (c1, c2, theta, v), zeros where absent (``info["objects"]``)."""
     risk_terms: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    """(steps, M) each object's share R_i of ``risk``."""
+    """(steps, M) each object's share $R_i$ of ``risk``."""
     rewards: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """(steps,) the env's reward."""
     unit: str = ""
@@ -116,7 +116,7 @@ class EpisodeRecord:
 
     @property
     def e_acc(self) -> float:
-        """Accumulated path error sum_k ||e_k|| over the episode (paper Sec. VII)."""
+        r"""Accumulated path error $\sum_k \|e_k\|$ over the episode (paper Sec. VII)."""
         return float(np.linalg.norm(self.path_error, axis=1).sum())
 
     @property
@@ -152,7 +152,7 @@ class EpisodeRecord:
 
     @property
     def violation_rate(self) -> float:
-        """Share of steps whose reported risk exceeded epsilon (by more than 1e-6 relative)."""
+        r"""Share of steps whose reported risk exceeded $\epsilon$ (by more than 1e-6 relative)."""
         return float(np.mean(self.risk > self.epsilon * (1 + 1e-6) + 1e-9)) if self.steps else 0.0
 
 

@@ -1,31 +1,31 @@
-"""Risk under real uncertainty: agents over many seeded episodes with sampled object motion.
+r"""Risk under real uncertainty: agents over many seeded episodes with sampled object motion.
 
     python -m benchmarks.sampled                       # the headline table (200 episodes each)
     python -m benchmarks.sampled --episodes 20 --agents smpc:exact --tolerances 0,2500
-    python -m benchmarks.sampled --severities paper,probability,injury \\
+    python -m benchmarks.sampled --severities paper,probability,injury \
         --tolerances paper=0,1000,2500 --tolerances probability=0,0.01 --tolerances injury=0,0.005
     python -m benchmarks.sampled --scene two_crossing --out results/two_crossing
 
 With ``object_motion="sampled"`` the object's true next position and speed are drawn from the
-very prediction model the agents plan with, so the env's per-step risk R_{k+1|k} is the exact
-expected harm of the next step. The question: does the tolerance epsilon bound what happens?
+very prediction model the agents plan with, so the env's per-step risk $R_{k+1|k}$ is the exact
+expected harm of the next step. The question: does the tolerance $\epsilon$ bound what happens?
 
 Tolerances are taken in each severity's own unit (J, probability, injuries; the ``unit`` column),
 and a value that cannot be one (a probability above 1, more than 2 injuries per step) is an error.
 Reported per configuration: the collision rate per episode (Wilson 95% interval), mean and 95th
-percentile of the per-step risk, the share of steps whose risk exceeded epsilon, the realised
-harm per step (mean of I_C s over the steps that happened: it should match the mean risk), the
+percentile of the per-step risk, the share of steps whose risk exceeded $\epsilon$, the realised
+harm per step (mean of $I_C s$ over the steps that happened: it should match the mean risk), the
 episode's summed risk (``info["episode_risk"]``, mean and max over episodes), the realised harm
 per episode (it should match the mean episode risk), e_acc, d_min and the goal rate.
 
-``--budgets`` adds a row per episode risk budget B (in the severity's own unit, checked as the
+``--budgets`` adds a row per episode risk budget $B$ (in the severity's own unit, checked as the
 tolerances are) for each SMPC agent, built with ``risk_budget=B`` and no per-step bound
 (:mod:`benchmarks.budget_rows`, written to ``budget.csv`` and a second table of ``sampled.md``).
-The PPO policies read epsilon in J, so their rows are the paper severity's only. With
+The PPO policies read $\epsilon$ in J, so their rows are the paper severity's only. With
 ``--budgets`` and no ``--tolerances`` the agents that take no budget (RMPC, PPO) run at
-epsilon = 0 and the SMPC agents run the budget rows only.
+$\epsilon = 0$ and the SMPC agents run the budget rows only.
 
-    python -m benchmarks.sampled --agents rmpc:worst_case,smpc:exact --severities probability \\
+    python -m benchmarks.sampled --agents rmpc:worst_case,smpc:exact --severities probability \
         --budgets 0.05,0.01 --episodes 1000 --out docs/results/budget
 """
 
@@ -148,7 +148,7 @@ def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None 
 def parse_tolerances(
     groups: list[str], severities: list[str], what: str = "tolerance"
 ) -> dict[str, list[float]]:
-    """``--tolerances`` (``what="budget"``: ``--budgets``) values -> epsilon (B) per severity, each
+    r"""``--tolerances`` (``what="budget"``: ``--budgets``) values -> $\epsilon$ ($B$) per severity, each
     in that severity's own unit.
 
     A group ``"A,B"`` applies to every severity without a group of its own ``"NAME=A,B"``. Raises

@@ -1,27 +1,28 @@
-"""The stress benchmark's scenes: a seeded family of random crossings, the object's true motion in
+r"""The stress benchmark's scenes: a seeded family of random crossings, the object's true motion in
 each, and the witness that tells an avoidable collision from an unavoidable one.
 
 A scene (:func:`make_scenes`, reproducible from ``(seed, index)``) draws:
 
 - the uncertainty: one of the paper's presets, or ``"enlarged"`` (:data:`ENLARGED`, 1.5 x the
-  high preset's growth Q and Delta);
-- v_ref uniform in [1, 8] m/s and the object's motion, ``"paper"`` or ``"sampled"``;
+  high preset's growth $Q$ and $\Delta$);
+- $v_{ref}$ uniform in [1, 8] m/s and the object's motion, ``"paper"`` or ``"sampled"``;
 - the ego's start near the path: arc length in [-85, -50] m, up to 2.5 m sideways, heading within
-  0.4 rad of the path's; at rest, or (half the scenes) already moving at up to min(v_ref, 4) m/s;
+  0.4 rad of the path's; at rest, or (half the scenes) already moving at up to $\min(v_{ref}, 4)$ m/s;
 - the object, one of three kinds: ``"close"`` (3.5-6 m from the ego, any heading, 0-2 m/s),
   ``"crossing"`` (timed to cross the path 2-8 s ahead, near where the ego would be then, at
   1-4 m/s) and ``"never"`` (12-25 m off the path, heading away from it or along it, 0-4 m/s).
 
 **Infeasible steps** (:func:`infeasible_step`): for the agents whose risk row is the box clearance
-(the RMPC, the exact SMPC at epsilon = 0), a step is certified infeasible when no input within the
+(the RMPC, the exact SMPC at $\epsilon = 0$), a step is certified infeasible when no input within the
 rate limits clears the truncation box at some prediction step; such a step needs a fallback level
 whatever the solver does.
 
 **Avoidable collision** (:func:`avoidable`): some open-loop manoeuvre of :func:`manoeuvres`, from
-the episode's start state, keeps the ego's centre more than r_e + r_o from the object's *true*
+the episode's start state, keeps the ego's centre more than $r_e + r_o$ from the object's *true*
 motion at every step of the episode's whole budget (``max_steps``), as the env checks it (at the
-sample instants). The manoeuvres hold a target speed in {v_min, ..., v_max} (1 m/s apart) and a
-target turn rate in omega_max x {0, +-1/8, +-1/4, +-1/2, +-1}, each reached under the rate limits.
+sample instants). The manoeuvres hold a target speed in $\{v_{min}, \dots, v_{max}\}$ (1 m/s apart) and a
+target turn rate in $\omega_{max} \times \{0, \pm 1/8, \pm 1/4, \pm 1/2, \pm 1\}$, each reached under
+the rate limits.
 The object's true motion (:func:`object_truth`) does not depend on the ego: the env draws its
 sampled motion from ``np_random`` and nothing else (the exact risk estimator draws nothing), so it
 is replayed from the episode's seed with the env's own transition functions.
@@ -50,7 +51,8 @@ MOTIONS: tuple[str, ...] = ("paper", "sampled")
 ENLARGED = Uncertainty(sigma_growth=(2.25, 2.25, 2.25), box_growth=(4.5, 4.5, 4.5))
 """1.5 x the high preset's growth per prediction step (Q = 1.5 I, Delta = 3 per side)."""
 TURN_FRACTIONS = (0.0, 0.125, -0.125, 0.25, -0.25, 0.5, -0.5, 1.0, -1.0)
-"""Target turn rates of the witness manoeuvres as fractions of omega_max (0, +-0.1, ..., +-0.8 rad/s)."""
+r"""Target turn rates of the witness manoeuvres as fractions of $\omega_{max}$ (0, $\pm$0.1, ...,
+$\pm$0.8 rad/s)."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,7 @@ class Scene:
     seed: int
 
     def scenario(self, risk_tolerance: float = 0.0) -> Scenario:
-        """The scene's scenario with tolerance epsilon ``risk_tolerance``."""
+        r"""The scene's scenario with tolerance $\epsilon$ = ``risk_tolerance``."""
         if self.uncertainty == "enlarged":
             base = Scenario(uncertainty=ENLARGED)
         else:
@@ -186,7 +188,7 @@ def ego_positions(scenario: Scenario, inputs: np.ndarray) -> np.ndarray:
 
 def witness_clearance(scene: Scene, truth: np.ndarray | None = None) -> float:
     """The largest, over the witness manoeuvres, of the smallest centre distance to the object's
-    true motion over the episode's budget, minus r_e + r_o [m]: > 0 means a collision was avoidable."""
+    true motion over the episode's budget, minus $r_e + r_o$ [m]: $> 0$ means a collision was avoidable."""
     sc = scene.scenario()
     truth = object_truth(scene) if truth is None else truth
     ego = ego_positions(sc, manoeuvres(sc, len(truth) - 1))
@@ -206,12 +208,12 @@ CERTIFY_GRID = 61
 def infeasible_step(
     scenario: Scenario, ego_pose: np.ndarray, last_input: np.ndarray, measurement: np.ndarray, backoff: float
 ) -> bool:
-    """Whether no input sequence within the bounds and rate limits keeps the ego clear of the
-    object's truncation box by ``backoff`` [m] at some prediction step n (the RMPC's rows, and the
-    exact SMPC's at epsilon = 0), so that the hard problem is infeasible. Certified at n = 1 on a
+    r"""Whether no input sequence within the bounds and rate limits keeps the ego clear of the
+    object's truncation box by ``backoff`` [m] at some prediction step $n$ (the RMPC's rows, and the
+    exact SMPC's at $\epsilon = 0$), so that the hard problem is infeasible. Certified at $n = 1$ on a
     grid of the first inputs, with the grid's worst position error (a Lipschitz bound) as margin;
-    at every n by the disc the ego can reach (the speeds under the rate limits, summed): if even
-    its farthest point stays within r_e + r_o of the box. ``ego_pose`` (3,), ``last_input``
+    at every $n$ by the disc the ego can reach (the speeds under the rate limits, summed): if even
+    its farthest point stays within $r_e + r_o$ of the box. ``ego_pose`` (3,), ``last_input``
     (v, omega), ``measurement`` the object's (c1, c2, theta, v, omega)."""
     ego, dt, r = scenario.ego, scenario.dt, scenario.collision_distance
     dv, dw = ego.accel_max * dt, ego.omega_rate_max * dt

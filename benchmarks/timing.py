@@ -7,12 +7,14 @@ Each agent drives ``RiskCrossing-v0`` (ego and the deterministic object of the p
 uncertainty level and risk tolerance, up to ``--steps`` steps (an episode also ends at a collision
 or the goal). A step's time is the whole ``agent.predict`` call as :class:`agents.SolveReport`
 measures it (initial guess, solver, fallback, the plan's risk re-evaluation), capped by the
-agents' ``max_solve_time`` (``--max-solve-time``; default 20 % of T). Printed per agent: solve time
+agents' ``max_solve_time`` (``--max-solve-time``; default 20 % of $T$). Printed per agent: solve time
 per step median / p95 / p99 / max [ms], fallback steps by level (soft / manoeuvre), steps the cap
-cut short, solver iterations (median), the real-time margin against the sample time T
-(``T / p95``, and the share of T left by the slowest step), the time to build the solvers, and per
-configuration e_acc, d_min and the steps taken. Targets on the project's 2-core machine (median /
-p95): RMPC and exact SMPC 5 / 15 ms, Monte Carlo SMPC (J = 500) 40 / 80 ms, no fallback.
+cut short, solver iterations (median), the real-time margin against the sample time $T$
+($T$ / p95, and the share of $T$ left by the slowest step), the time to build the solvers, and per
+configuration e_acc, d_min and the steps taken. Each agent's line ends with its check against the
+solve-time bounds
+:data:`TARGETS_MS` (median / p95 on two cores): RMPC and exact SMPC 5 / 15 ms, Monte Carlo SMPC
+($J$ = 500) 40 / 80 ms, no fallback.
 
 ``--jit`` runs the solvers on compiled code (generated C, ``$CC`` at ``-O1``; see
 :mod:`agents.mpc.nlp.solver`): about 40 s for the exact SMPC's three solvers, shared by every
@@ -20,7 +22,7 @@ uncertainty level
 and tolerance, paid once per machine (the libraries are kept in ``$RISKMPC_JIT_CACHE``, default
 ``~/.cache/riskcrossing/jit``); the "build" time printed is what this run spent building and
 compiling. The Monte Carlo SMPC's code (500 draws per step) would take many minutes to compile and
-meets its target without. Timings on a shared machine are noisy: run it alone. Agents are named as
+meets its bounds without. Timings on a shared machine are noisy: run it alone. Agents are named as
 in every command (:mod:`benchmarks.agent_names`); ``--out FILE`` writes the report and its
 manifest ``FILE-STEM.manifest.json`` beside it (:mod:`benchmarks.output`).
 """

@@ -1,18 +1,20 @@
-"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk cost (stable-baselines3).
+r"""Train the PPO baseline on the vectorised RiskCrossing-v0 with a risk cost (stable-baselines3).
 
     python -m benchmarks.train_ppo --lagrangian --seeds 5 --out agents/models --name ppo_lagrangian
     python -m benchmarks.train_ppo --out agents/models --name ppo_penalty      # the shipped policies
-    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \\
+    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \
         --checkpoint-every 0 --out agents/models --name ppo_lagrangian_two_crossing   # two objects
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
-The copies are split over the uncertainty levels and draw epsilon per episode; the policy is
+The copies are split over the uncertainty levels and draw $\epsilon$ per episode; the policy is
 told both (:class:`agents.ppo.policy.FeatureSpec`). Reward per step
 (:class:`agents.ppo.training.RewardWeights`):
-``-w_e ||e_{k+1}|| + w_p (lambda_{k+1} - lambda_k) + w_g [goal] - beta c_k``, with the cost
-``c_k = max(0, R_{k+1|k} - epsilon) / cost_scale + collision_cost [collision]``. ``--lagrangian``
-adapts beta after every rollout by dual ascent, ``beta <- max(0, beta + dual_lr (mean episode
-cost - cost_limit))``. Writes ``OUT/NAME.zip`` and ``OUT/NAME.json`` (the arguments, input limits,
+$-w_e \|e_{k+1}\| + w_p (\lambda_{k+1} - \lambda_k) + w_g 1[\text{goal}] - \beta c_k$, with the cost
+$c_k = \max(0, R_{k+1|k} - \epsilon) / c_s + w_c 1[\text{collision}]$ ($c_s$ = ``--cost-scale``,
+$w_c$ = ``--collision-cost``). ``--lagrangian`` adapts $\beta$ after every rollout by dual ascent,
+$\beta \leftarrow \max(0, \beta + \eta (\bar c - c_{lim}))$ with $\bar c$ the mean episode cost,
+$\eta$ = ``--dual-lr`` and $c_{lim}$ = ``--cost-limit``. Writes ``OUT/NAME.zip`` and ``OUT/NAME.json``
+(the arguments, input limits,
 features, wall time and training throughput), checkpoints in ``OUT/NAME_checkpoints`` and SB3's
 CSV log in ``OUT/NAME_logs``; :meth:`agents.ppo.policy.PPOAgent.load` reads the model back. ``--seeds N``
 trains N seeds, scores them and ships the best (:func:`train_seeds`).
@@ -81,22 +83,22 @@ class Args:
     seed: int = 0
     """Seed of the env copies, the policy's initialisation and its sampling."""
     seeds: int = 1
-    """Train this many seeds (seed, seed + 1, ...): each is saved as ``OUT/NAME_seeds/NAME_seedS``
-    and scored on sampled motion (``--eval-episodes``); the table of mean +- std goes to
+    r"""Train this many seeds (seed, seed + 1, ...): each is saved as ``OUT/NAME_seeds/NAME_seedS``
+    and scored on sampled motion (``--eval-episodes``); the table of mean $\pm$ std goes to
     ``OUT/NAME_seeds.md`` (and ``.json``) and the best seed is copied to ``OUT/NAME.zip``."""
     uncertainty: str = "low,medium,high"
     """Comma list of the uncertainty presets trained on: the copies are split evenly over them."""
     tolerances: str = "0,500,1000,1500,2000,2500"
-    """Comma list of epsilon [the severity's unit], one drawn per episode (the paper's Table II)."""
+    r"""Comma list of $\epsilon$ [the severity's unit], one drawn per episode (the paper's Table II)."""
     conditioned: bool = True
-    """Show the policy epsilon and the uncertainty (agents.ppo.policy.FeatureSpec)."""
+    r"""Show the policy $\epsilon$ and the uncertainty (agents.ppo.policy.FeatureSpec)."""
     prediction: bool = True
     """Also show the object's predicted means and truncation boxes over the horizon."""
     forward_only: bool = True
-    """Map the policy's actions to speeds v >= 0 (no reversing: unrestricted, PPO found reversing
+    r"""Map the policy's actions to speeds $v \ge 0$ (no reversing: unrestricted, PPO found reversing
     to the goal with the ego turned around, a local optimum of the path error)."""
     severity: str = "paper"
-    """Severity of the risk in the cost (the paper's, in J, as Table II's epsilon)."""
+    r"""Severity of the risk in the cost (the paper's, in J, as Table II's $\epsilon$)."""
     object_motion: str = "sampled"
     """How the object moves: ``"sampled"`` (draws from the prediction model) or ``"paper"``."""
     scene: str = "paper"
@@ -106,27 +108,27 @@ class Args:
     """Train on seeded variations of the scenario (curvature, starts, object speed); off: the
     paper's scene with the object's motion sampled, the distribution the benchmarks score on."""
     w_path_error: float = 1.0
-    """Reward per unit of the path error ||e_{k+1}|| (subtracted)."""
+    r"""Reward per unit of the path error $\|e_{k+1}\|$ (subtracted)."""
     w_progress: float = 2.0
-    """Reward per m of progress along the path (lambda_{k+1} - lambda_k)."""
+    r"""Reward per m of progress along the path ($\lambda_{k+1} - \lambda_k$)."""
     w_goal: float = 30.0
     """Reward on reaching the goal."""
     cost_scale: float = 1000.0
-    """Risk above epsilon per unit of cost [the severity's unit]."""
+    r"""Risk above $\epsilon$ per unit of cost [the severity's unit]."""
     collision_cost: float = 1.0
     """Cost of a collision [cost units]."""
     risk_weight: float = 300.0
-    """beta: the penalty per unit of cost (the initial value with --lagrangian)."""
+    r"""$\beta$: the penalty per unit of cost (the initial value with --lagrangian)."""
     penalty_warmup: int = 0
-    """Env steps at beta = 0 before the penalty switches on (without --lagrangian): the policy
+    r"""Env steps at $\beta = 0$ before the penalty switches on (without --lagrangian): the policy
     first learns to drive, then to keep the risk down."""
     lagrangian: bool = False
-    """Adapt beta by dual ascent toward cost_limit."""
+    r"""Adapt $\beta$ by dual ascent toward ``cost_limit``."""
     cost_limit: float = 0.02
-    """Per-episode cost the Lagrangian aims at: the mean over the rollout's finished episodes of
-    sum_k c_k (agents.ppo.training.RewardWeights: a collision counts collision_cost)."""
+    r"""Per-episode cost the Lagrangian aims at: the mean over the rollout's finished episodes of
+    $\sum_k c_k$ (agents.ppo.training.RewardWeights: a collision counts collision_cost)."""
     dual_lr: float = 5.0
-    """Step size of the dual ascent on beta [beta per unit of episode cost]."""
+    r"""Step size of the dual ascent on $\beta$ [$\beta$ per unit of episode cost]."""
     n_steps: int = 128
     """Rollout length per copy between updates."""
     batch_size: int = 2048
@@ -138,7 +140,7 @@ class Args:
     gamma: float = 0.99
     """Discount factor."""
     gae_lambda: float = 0.95
-    """lambda of generalised advantage estimation."""
+    r"""$\lambda$ of generalised advantage estimation."""
     ent_coef: float = 0.0
     """Weight of the entropy bonus."""
     net_arch: tuple[int, ...] = (64, 64)
@@ -154,7 +156,7 @@ class Args:
     eval_episodes: int = 512
     """Episodes of each seed's evaluation (sampled motion, medium uncertainty, --eval-epsilon)."""
     eval_epsilon: float = 0.0
-    """epsilon of the evaluation [the severity's unit]."""
+    r"""$\epsilon$ of the evaluation [the severity's unit]."""
 
 
 def field_help() -> dict[str, str]:

@@ -1,4 +1,4 @@
-"""A Griffe extension that lets mkdocstrings render our reStructuredText-flavoured docstrings.
+r"""A Griffe extension that lets mkdocstrings render our reStructuredText-flavoured docstrings.
 
 The docstrings use Sphinx roles (``:class:`~risk_env.Scenario```), doctest examples (``>>>``)
 and markdown tables whose cells may hold a ``|`` (``R_{k+1|k}``). This extension rewrites them
@@ -7,7 +7,8 @@ when the packages are loaded, before mkdocstrings renders anything:
 - a role becomes an optional cross-reference: a link when the target is on the site, plain code
   otherwise (private names, other libraries);
 - a doctest block becomes a ``pycon`` code block;
-- a ``|`` inside braces in a table row is escaped;
+- a ``|`` inside braces in a table row is escaped, and inside maths (``$R_{k+1|k}$``) written
+  ``\vert``;
 - an ``Args:`` entry that documents several parameters at once (``tol, max_iter: ...``) becomes
   one entry per parameter, so the parameters table lists each.
 
@@ -23,7 +24,9 @@ from typing import Any
 import griffe
 
 _ROLE = re.compile(r":(?:mod|class|func|meth|data|attr|obj|exc):`(~?)([^`]+)`")
+_EXPLICIT = re.compile(r"(.+?) <([\w.]+)>")
 _BRACED_PIPE = re.compile(r"\{([^{}|]*)\|([^{}]*)\}")
+_INLINE_MATHS = re.compile(r"(?<![\\$])\$[^$\n]+?\$")
 _PACKAGES = ("risk_env", "agents", "benchmarks")
 
 
@@ -47,8 +50,10 @@ def roles(obj: griffe.Object, text: str) -> str:
     """Sphinx roles in ``text`` as optional autorefs cross-references."""
 
     def replace(match: re.Match[str]) -> str:
-        short, target = match.group(1) == "~", match.group(2)
+        short, target = match.group(1) == "~", " ".join(match.group(2).split())
         title = target.rsplit(".", 1)[-1] if short else target
+        if (explicit := _EXPLICIT.fullmatch(target)) is not None:  # Sphinx's ``title <target>``
+            title, target = explicit.groups()
         identifier = _identifier(obj, target)
         if identifier is None or any(part.startswith("_") for part in identifier.split(".")):
             return f"`{title}`"
@@ -77,12 +82,18 @@ def doctests(text: str) -> str:
     return "\n".join(out)
 
 
+def maths_pipes(line: str) -> str:
+    r"""``|`` inside the inline maths of a markdown table row as ``\vert``, which cannot end a cell
+    (an escaped ``\|`` would reach MathJax as the norm bars)."""
+    return _INLINE_MATHS.sub(lambda m: m.group(0).replace("|", r"\vert "), line)
+
+
 def table_pipes(text: str) -> str:
-    """Escape ``|`` inside braces in markdown table rows (``R_{k+1|k}``)."""
+    r"""Escape ``|`` inside braces in markdown table rows (``R_{k+1|k}``); in maths, ``\vert``."""
     lines = []
     for line in text.split("\n"):
         if line.lstrip().startswith("|"):
-            line = _BRACED_PIPE.sub(r"{\1\\|\2}", line)
+            line = _BRACED_PIPE.sub(r"{\1\\|\2}", maths_pipes(line))
         lines.append(line)
     return "\n".join(lines)
 

@@ -33,6 +33,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path[:1]:
     sys.path.insert(0, str(ROOT))  # document this checkout, whatever else is installed
 MARKER = re.compile(r"^<!-- ([a-z-]+)(?: ([\w.]+))? -->$", re.MULTILINE)
+INLINE_MATHS = re.compile(r"(?<![\\$])\$[^$\n]+?\$")
 HELP_COLUMNS = "100"
 """Terminal width the ``--help`` texts are formatted for."""
 
@@ -50,7 +51,11 @@ def attribute_docs(cls: type) -> dict[str, str]:
 
 
 def _cell(text: str) -> str:
-    return text.replace("|", "\\|")
+    r"""``text`` for a markdown table cell: ``|`` escaped, inside maths written ``\vert`` (an escaped
+    ``\|`` would reach MathJax as the norm bars)."""
+    pieces = INLINE_MATHS.split(text)
+    maths = [m.replace("|", r"\vert ") for m in INLINE_MATHS.findall(text)]
+    return "".join(p.replace("|", "\\|") + (maths[i] if i < len(maths) else "") for i, p in enumerate(pieces))
 
 
 def _default(value: Any) -> str:

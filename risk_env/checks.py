@@ -79,7 +79,7 @@ def finite(name: str, value: Any) -> float:
 
 
 def positive(name: str, value: Any, strict: bool = True) -> float:
-    """``value`` as a float if it is finite and > 0 (``strict=False``: >= 0), else an error naming
+    r"""``value`` as a float if it is finite and $> 0$ (``strict=False``: $\ge 0$), else an error naming
     ``name``."""
     out = finite(name, value)
     if out < 0 or (strict and out == 0):
@@ -206,8 +206,8 @@ def ego_action(action: Any, ego: Any) -> tuple[float, float]:
 
 
 def seeds(seed: Any, n: int) -> list[int | None]:
-    """Seeds of ``n`` copies from ``None``, one integer ``s`` (copies get ``s + i``) or ``n`` of
-    them (integers or ``None``); integers of any integral type, >= 0."""
+    r"""Seeds of ``n`` copies from ``None``, one integer ``s`` (copies get ``s + i``) or ``n`` of
+    them (integers or ``None``); integers of any integral type, $\ge 0$."""
     if seed is None:
         return [None] * n
     if not isinstance(seed, (list, tuple, np.ndarray)):

@@ -1,21 +1,21 @@
-"""The observation vector of ``RiskCrossing-v0``: its layout, shared by the env and the agents.
+r"""The observation vector of ``RiskCrossing-v0``: its layout, shared by the env and the agents.
 
-``obs`` is float32 of length :func:`size` ``(K) = 10 + 6 K``: the ego's part, then K object slots
-(K = the env's ``object_slots``, fixed at construction; by default the scenario's number of
-objects). Object i of the scenario fills slot i; a slot without an object is *absent*: its flag
+``obs`` is float32 of length :func:`size` ``(K)`` $= 10 + 6 K$: the ego's part, then $K$ object
+slots ($K$ = the env's ``object_slots``, fixed at construction; by default the scenario's number
+of objects). Object $i$ of the scenario fills slot $i$; a slot without an object is *absent*: its flag
 is 0 and its other five entries are 0 too (never a stand-in position).
 
 | index | name | unit |
 | --- | --- | --- |
-| 0, 1, 2 | ego pose c1, c2, theta | m, m, rad (theta wrapped to [-pi, pi)) |
-| 3, 4 | ego's last applied input v, omega | m/s, rad/s |
-| 5 | lambda: arc length of the ego's closest path point | m (goal at 0) |
-| 6..9 | path error e_k = (c1 - c1_P, c2 - c2_P, theta - theta_P, v - v_ref) | m, m, rad, m/s |
-| 10 + 6 i | slot i's presence flag: 1.0 an object is there, 0.0 absent | - |
-| 11 + 6 i, 12 + 6 i, 13 + 6 i | object i's measured pose c1, c2, theta | m, m, rad (wrapped) |
-| 14 + 6 i, 15 + 6 i | object i's measured inputs v, omega | m/s, rad/s |
+| 0, 1, 2 | ego pose $c_1, c_2, \theta$ | m, m, rad ($\theta$ wrapped to $[-\pi, \pi)$) |
+| 3, 4 | ego's last applied input $v, \omega$ | m/s, rad/s |
+| 5 | $\lambda$: arc length of the ego's closest path point | m (goal at 0) |
+| 6..9 | path error $e_k = (c_1 - c_{1,P}, c_2 - c_{2,P}, \theta - \theta_P, v - v_{ref})$ | m, m, rad, m/s |
+| 10 + 6 i | slot $i$'s presence flag: 1.0 an object is there, 0.0 absent | - |
+| 11 + 6 i, 12 + 6 i, 13 + 6 i | object $i$'s measured pose $c_1, c_2, \theta$ | m, m, rad (wrapped) |
+| 14 + 6 i, 15 + 6 i | object $i$'s measured inputs $v, \omega$ | m/s, rad/s |
 
-for i = 0 .. K-1. With one slot (the paper's scene) the observation has :data:`SIZE` = 16 entries
+for $i = 0, \dots, K-1$. With one slot (the paper's scene) the observation has :data:`SIZE` = 16 entries
 and the object at 11..15 (:data:`OBJECT`).
 
 Read observations with :func:`split`, which names the parts, checks the slot count and the
@@ -24,7 +24,7 @@ theta, v, omega)`` as :func:`risk_env.predict` takes them, ``present`` ``(K,)`` 
 ``object_measurement``, the first present object's (what a single-object agent plans against).
 
 Bounds: the observation Box is fixed, the same for every scenario: :data:`POSITION_BOUND` for
-positions, arc length and position errors, pi for the wrapped headings, :data:`RATE_BOUND` for
+positions, arc length and position errors, $\pi$ for the wrapped headings, :data:`RATE_BOUND` for
 speeds, turn rates and the speed error, [0, 1] for the flags (:func:`bounds`). A Box derived from
 each scenario would change with it: saved policies (the PPO models) would no longer match, and
 randomised episodes and batched copies could not share one space. So the scenario guarantees the
@@ -142,7 +142,7 @@ class Observation(NamedTuple):
     ego_input: np.ndarray
     """``(2,)`` the last applied v [m/s], omega [rad/s]."""
     progress: float
-    """lambda [m], the arc length of the closest path point."""
+    r"""$\lambda$ [m], the arc length of the closest path point."""
     path_error: np.ndarray
     """``(4,)`` e [m, m, rad, m/s]."""
     objects: np.ndarray
@@ -221,11 +221,11 @@ def build(
     objects: Sequence[Sequence[float]] | np.ndarray,
     slots: int | None = None,
 ) -> np.ndarray:
-    """One observation ``(10 + 6 K,)`` float32 from its parts, as the env lays it out: the ego's
+    r"""One observation ``(10 + 6 K,)`` float32 from its parts, as the env lays it out: the ego's
     pose ``(3,)`` and last input ``(2,)``, lambda [m], the path error ``(4,)``, and the
     measurements ``(M, 5)`` of the present objects (c1, c2, theta, v, omega) in slots 0..M-1, the
-    other ``slots - M`` slots absent (K = ``slots``, default M). Headings are wrapped to
-    [-pi, pi). For observations made outside the env (:mod:`risk_env.highway.adapter`)."""
+    other ``slots - M`` slots absent ($K$ = ``slots``, default $M$). Headings are wrapped to
+    $[-\pi, \pi)$. For observations made outside the env (:mod:`risk_env.highway.adapter`)."""
     measured = np.asarray(objects, dtype=float).reshape(-1, SLOT_SIZE - 1)
     slots = len(measured) if slots is None else slots
     if len(measured) > slots:

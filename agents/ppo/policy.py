@@ -1,16 +1,16 @@
-"""The PPO baseline: what the policy sees, how its actions become inputs, and loading a trained one.
+r"""The PPO baseline: what the policy sees, how its actions become inputs, and loading a trained one.
 
 A policy trained by ``python -m benchmarks.train_ppo`` acts through two fixed maps, used alike in
 training (as Gymnasium vector wrappers) and by :class:`PPOAgent`:
 
 - :func:`features`: the observation -> 14 scaled features in the ego's frame (path
   error, own input, the object's relative position, heading and velocity, distance, progress);
-  :class:`FeatureSpec` adds the episode's :class:`Context` (the risk tolerance epsilon on a log
+  :class:`FeatureSpec` adds the episode's :class:`Context` (the risk tolerance $\epsilon$ on a log
   scale and the uncertainty's growth per step) and, optionally, the object's prediction over the
-  horizon (means and truncation boxes in the ego's frame); with ``slots`` K > 1 it shows every
+  horizon (means and truncation boxes in the ego's frame); with ``slots`` $K > 1$ it shows every
   object slot (:func:`slot_features`, each present object's prediction, absent slots zeroed);
-- :func:`to_inputs`: the policy's action in [-1, 1]^2 -> the change of ``(v, omega)`` within one
-  step's rate limits (``accel_max dt``, ``omega_rate_max dt``), clipped to the input limits, so a
+- :func:`to_inputs`: the policy's action in $[-1, 1]^2$ -> the change of ``(v, omega)`` within one
+  step's rate limits (``accel_max`` $dt$, ``omega_rate_max`` $dt$), clipped to the input limits, so a
   learned policy obeys the same rate limits as the MPCs.
 
 Needs the ``rl`` extra (``pip install "riskcrossing[rl]"``: torch CPU and stable-baselines3).
@@ -93,16 +93,17 @@ def features(obs: np.ndarray) -> np.ndarray:
 
 
 EPSILON_UNIT = 500.0
-"""epsilon's feature is ``log1p(epsilon / EPSILON_UNIT) / log1p(5)`` [epsilon in the training
-severity's unit, J by default]: 0 at epsilon = 0, 1 at the paper's largest tolerance 2500 J."""
+r"""$\epsilon$'s feature is $\log(1 + \epsilon / \epsilon_u) / \log 6$, $\epsilon_u$ = ``EPSILON_UNIT``
+[$\epsilon$ in the training severity's unit, J by default]: 0 at $\epsilon = 0$, 1 at the paper's
+largest tolerance 2500 J."""
 CONTEXT_SIZE = 6
-"""Columns of a context array: epsilon's feature, the c1 sigma growth [m/step], the box growth
+r"""Columns of a context array: $\epsilon$'s feature, the c1 $\sigma$ growth [m/step], the box growth
 (c1, c2) [m/step], the box half widths at the measurement (c1, c2) [m]."""
 
 
 @dataclass(frozen=True)
 class Context:
-    """What a tolerance-conditioned policy is told about its episode: epsilon and the uncertainty."""
+    r"""What a tolerance-conditioned policy is told about its episode: $\epsilon$ and the uncertainty."""
 
     epsilon: float
     """The risk tolerance [the severity's unit]."""
@@ -118,14 +119,14 @@ class Context:
 
 @dataclass(frozen=True)
 class FeatureSpec:
-    """Which features a policy sees: the 14 of :func:`features`, the context's 3 (epsilon, sigma
+    r"""Which features a policy sees: the 14 of :func:`features`, the context's 3 ($\epsilon$, $\sigma$
     growth / 1.5 m, box growth / 3 m) and with ``prediction`` the object's predicted mean (ego
     frame, / 20 m) and its truncation box's half extents along the ego's axes (/ 10 m) at each
     of ``steps``.
 
-    With ``slots`` K > 1 the policy sees every slot instead of the first present object: the
+    With ``slots`` $K > 1$ the policy sees every slot instead of the first present object: the
     ego's 7 of :func:`slot_features`, 8 per slot (flag and the object's 7), the context's 3, and
-    with ``prediction`` 4 ``len(steps)`` per slot; an absent slot's entries are all 0.
+    with ``prediction`` $4 \times$ ``len(steps)`` per slot; an absent slot's entries are all 0.
     """
 
     prediction: bool = False
@@ -265,11 +266,11 @@ class InputLimits:
     dv_max: float
     """Largest speed change per step [m/s] (accel_max dt)."""
     domega_max: float
-    """Largest turn-rate change per step [rad/s] (omega_rate_max dt)."""
+    """Largest turn-rate change per step [rad/s] (``omega_rate_max`` $dt$)."""
 
     @classmethod
     def of(cls, scenario: Scenario, forward_only: bool = False) -> InputLimits:
-        """The limits of ``scenario``'s ego; ``forward_only``: no reversing (v >= 0)."""
+        r"""The limits of ``scenario``'s ego; ``forward_only``: no reversing ($v \ge 0$)."""
         e = scenario.ego
         v_min = max(e.v_min, 0.0) if forward_only else e.v_min
         return cls(v_min, e.v_max, e.omega_max, e.accel_max * scenario.dt, e.omega_rate_max * scenario.dt)
@@ -310,7 +311,7 @@ class PPOAgent:
         self.spec = spec
         """The conditioned features the policy sees; None: the 14 of :func:`features` alone."""
         self.context = context
-        """The episode's epsilon and uncertainty told to a conditioned policy (``spec`` not None)."""
+        r"""The episode's $\epsilon$ and uncertainty told to a conditioned policy (``spec`` not None)."""
         self.metadata: dict[str, Any] = dict(metadata or {})
         """How the policy was trained (the training arguments, wall time, steps/s), as saved."""
         self.last_solve = None
@@ -318,12 +319,12 @@ class PPOAgent:
 
     @classmethod
     def load(cls, path: str | Path, scenario: Scenario | None = None) -> PPOAgent:
-        """Load ``path`` (an SB3 ``.zip``) and its ``.json`` metadata beside it.
+        r"""Load ``path`` (an SB3 ``.zip``) and its ``.json`` metadata beside it.
 
         The input limits are the saved ones, or ``scenario``'s when given (a different car). A
-        tolerance-conditioned policy (metadata ``feature_spec``) is told ``scenario``'s epsilon and
-        uncertainty (without a scenario: epsilon 0 and the medium level); its severity must be the
-        one it was trained with, since epsilon is read in that unit.
+        tolerance-conditioned policy (metadata ``feature_spec``) is told ``scenario``'s $\epsilon$ and
+        uncertainty (without a scenario: $\epsilon = 0$ and the medium level); its severity must be
+        the one it was trained with, since $\epsilon$ is read in that unit.
         """
         from stable_baselines3 import PPO
 

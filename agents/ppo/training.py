@@ -29,38 +29,41 @@ from risk_env.scenario.parts import Uncertainty
 
 @dataclass(frozen=True)
 class RewardWeights:
-    """The PPO reward's weights; per step (episode end: the goal bonus once)::
+    r"""The PPO reward's weights; per step (episode end: the goal bonus once)
 
-        r = -path_error ||e_{k+1}|| + progress (lambda_{k+1} - lambda_k) + goal [goal reached]
-            - beta c_k,   c_k = max(0, R_{k+1|k} - epsilon) / cost_scale + collision [collided]
+    $$r_k = -w_e \|e_{k+1}\| + w_p (\lambda_{k+1} - \lambda_k) + w_g 1[\text{goal reached}] - \beta c_k,$$
 
-    The env's own reward (the paper's ``-||e|| - w R``) is not used: the view replaces it.
+    $$c_k = \max(0, R_{k+1|k} - \epsilon) / c_s + w_c 1[\text{collided}],$$
+
+    with the weights $w_e$ = ``path_error``, $w_p$ = ``progress``, $w_g$ = ``goal``, $w_c$ =
+    ``collision``, the cost scale $c_s$ = ``cost_scale`` and the risk weight $\beta$. The env's own
+    reward (the paper's $-\|e\| - w R$) is not used: the view replaces it.
     """
 
     path_error: float = 1.0
-    """Weight of the path error term [reward per unit of ||e||]."""
+    r"""Weight of the path error term [reward per unit of $\|e\|$]."""
     progress: float = 1.0
-    """Weight of the progress along the path [reward per m of lambda]."""
+    r"""Weight of the progress along the path [reward per m of $\lambda$]."""
     goal: float = 10.0
     """Bonus on the step that reaches the goal [reward]."""
     cost_scale: float = 1000.0
-    """Risk above epsilon per unit of cost [the severity's unit, J by default]."""
+    r"""Risk above $\epsilon$ per unit of cost [the severity's unit, J by default]."""
     collision: float = 1.0
     """Cost of a collision step [cost units]."""
 
 
 TERMS = ("path_error", "progress", "goal", "cost")
-"""Names of the PPO reward's terms in ``info["rewards"]`` (the cost term is ``-beta c_k``)."""
+r"""Names of the PPO reward's terms in ``info["rewards"]`` (the cost term is $-\beta c_k$)."""
 
 
 class PolicyView(VectorWrapper):
-    """Features in, [-1, 1] actions out, the PPO reward, for a vectorised ``RiskCrossing-v0``.
+    r"""Features in, $[-1, 1]$ actions out, the PPO reward, for a vectorised ``RiskCrossing-v0``.
 
     With a :class:`~agents.ppo.policy.FeatureSpec` the policy also sees each copy's :class:`Context`:
-    epsilon drawn per episode from ``tolerances`` (``rng``), the uncertainty fixed per copy
+    $\epsilon$ drawn per episode from ``tolerances`` (``rng``), the uncertainty fixed per copy
     (``uncertainties``, one per copy: :class:`LevelMix` gives them). ``info["rewards"]`` holds
-    the terms of :class:`RewardWeights` ``(B,)`` each, ``info["cost"]`` the cost ``c_k`` (both in
-    ``final_info`` too for an ended copy). ``risk_weight`` is beta (the trainer sets it).
+    the terms of :class:`RewardWeights` ``(B,)`` each, ``info["cost"]`` the cost $c_k$ (both in
+    ``final_info`` too for an ended copy). ``risk_weight`` is $\beta$ (the trainer sets it).
     """
 
     def __init__(
@@ -80,7 +83,7 @@ class PolicyView(VectorWrapper):
         self.weights = weights or RewardWeights()
         self.tolerances = np.asarray(tolerances, dtype=float)
         self.risk_weight = float(risk_weight)
-        """beta: reward per unit of cost."""
+        r"""$\beta$: reward per unit of cost."""
         n = env.num_envs
         if uncertainties is None:
             uncertainties = (
@@ -89,7 +92,7 @@ class PolicyView(VectorWrapper):
         self.uncertainties = list(uncertainties)
         self.rng = np.random.default_rng(seed)
         self.epsilon = np.zeros(n)
-        """Each copy's epsilon in its current episode."""
+        r"""Each copy's $\epsilon$ in its current episode."""
         self._context = np.array([Context(0.0, u).array() for u in self.uncertainties])
         size = FEATURES if spec is None else spec.size
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float32)

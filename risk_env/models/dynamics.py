@@ -1,8 +1,8 @@
-"""The unicycle with the paper's exact arc update (Sec. VI-A), written once for both backends.
+r"""The unicycle with the paper's exact arc update (Sec. VI-A), written once for both backends.
 
-``x+ = x + (v/omega)(sin(theta + omega T) - sin theta)`` and so on divides by omega; the form
-used here, ``v T sinc(omega T / 2) cos(theta + omega T / 2)``, is the same map and stays smooth
-and exact as omega -> 0 (a straight line).
+$c_1^+ = c_1 + (v / \omega)(\sin(\theta + \omega T) - \sin \theta)$ and so on divides by $\omega$;
+the form used here, $v T \,\mathrm{sinc}(\omega T / 2) \cos(\theta + \omega T / 2)$, is the same map
+and stays smooth and exact as $\omega \to 0$ (a straight line).
 """
 
 from __future__ import annotations

@@ -65,9 +65,9 @@ class Ops:
     const: Callable[[np.ndarray], Any]
     """A constant numpy vector in this backend."""
     hypot: Callable[[Any, Any], Any]
-    """sqrt(x^2 + y^2), without overflow."""
+    r"""$\sqrt{x^2 + y^2}$, without overflow."""
     norm_ppf: Callable[[Any], Any]
-    """The standard normal quantile Phi^-1(p), -inf at 0 and inf at 1."""
+    r"""The standard normal quantile $\Phi^{-1}(p)$, $-\infty$ at 0 and $\infty$ at 1."""
     elementwise: Callable[..., Any]
     """``elementwise(f, *vectors)``: the scalar formula ``f`` applied entry by entry (numpy and
     CasADi broadcast; Python floats go through the lists)."""
@@ -79,8 +79,8 @@ class Ops:
         return self.minimum(self.maximum(x, lo), hi)
 
     def sinc(self, a: Any) -> Any:
-        """sin(a)/a, smooth and exact through a = 0: below |a| = 1e-4 its Taylor polynomial, whose
-        error there (a^4/120 < 1e-18) is below rounding. numpy arrays take sin(a)/a all the way
+        r"""$\sin(a)/a$, smooth and exact through $a = 0$: below $|a| = 10^{-4}$ its Taylor polynomial,
+        whose error there ($a^4/120 < 10^{-18}$) is below rounding. numpy arrays take $\sin(a)/a$ all the way
         down to 0 (within an ulp of the polynomial; a third of its numpy calls)."""
         if type(a) is float:  # the formula below, spelled for one float (no face lookups)
             return math.sin(a) / a if abs(a) >= 1e-4 else 1.0 - a * a / 6.0
@@ -93,7 +93,7 @@ class Ops:
         return self.where(small, 1.0 - a * a / 6.0, self.sin(a_safe) / a_safe)
 
     def norm_cdf(self, z: Any) -> Any:
-        """Standard normal CDF Phi(z)."""
+        r"""Standard normal CDF $\Phi(z)$."""
         if self.name == "numpy":
             return special.ndtr(z)
         if self.name == "math":  # erfc keeps the lower tail's relative precision, as ndtr does
@@ -109,8 +109,8 @@ class Ops:
         return a - 2.0 * math.pi * self.floor((a + math.pi) / (2.0 * math.pi))
 
     def select(self, c: Any, a: Any, b: Any) -> Any:
-        """``a`` where ``c`` else ``b``, for finite ``a`` and ``b``. CasADi writes it as the sum
-        ``c a + (1 - c) b`` (a comparison has no derivative), so derivatives follow one
+        r"""``a`` where ``c`` else ``b``, for finite ``a`` and ``b``. CasADi writes it as the sum
+        $c\, a + (1 - c)\, b$ (a comparison has no derivative), so derivatives follow one
         expression rather than both branches of a conditional; numpy and math use ``where``."""
         if self.name == "casadi":
             return c * a + (1 - c) * b
@@ -174,7 +174,7 @@ _NORMAL = statistics.NormalDist()
 
 
 def _math_norm_ppf(p: float) -> float:
-    """Phi^-1(p) by Wichura's AS241 (within ~1e-15 relative of scipy's ndtri)."""
+    r"""$\Phi^{-1}(p)$ by Wichura's AS241 (within ~1e-15 relative of scipy's ndtri)."""
     if 0.0 < p < 1.0:
         return _NORMAL.inv_cdf(p)
     return -math.inf if p <= 0.0 else math.inf

@@ -1,8 +1,9 @@
-"""The reference path: point, heading, closest-point projection, timing law and path error.
+r"""The reference path: point, heading, closest-point projection, timing law and path error.
 
 The arc of :class:`~risk_env.scenario.scenario.ReferencePath` is written in the goal's frame as
-``l_x = l sinc(kappa l)``, ``l_y = l (kappa l / 2) sinc(kappa l / 2)^2``, smooth for any kappa
-including 0, and defined for every arc length: beyond lambda_g it continues the arc, so an MPC
+$l_x = l \,\mathrm{sinc}(\kappa l)$, $l_y = l\, (\kappa l / 2)\, \mathrm{sinc}(\kappa l / 2)^2$, smooth
+for any
+$\kappa$ including 0, and defined for every arc length: beyond $\lambda_g$ it continues the arc, so an MPC
 horizon never runs off the path.
 
 Every function takes a :class:`~risk_env.scenario.scenario.ReferencePath` (floats) or a :class:`PathBatch`
@@ -28,9 +29,9 @@ class _GoalBatch:
     y: np.ndarray
     theta: np.ndarray
     cos: np.ndarray
-    """cos(theta), kept with it (the goal is a parameter, not a variable)."""
+    r"""$\cos \theta$, kept with it (the goal is a parameter, not a variable)."""
     sin: np.ndarray
-    """sin(theta)."""
+    r"""$\sin \theta$."""
 
     @classmethod
     def of(cls, x: Any, y: Any, theta: Any) -> _GoalBatch:
@@ -46,7 +47,7 @@ class PathBatch:
     """
 
     curvature: np.ndarray
-    """kappa ``(B,)`` [1/m]."""
+    r"""$\kappa$ ``(B,)`` [1/m]."""
     goal: _GoalBatch | Pose
     """Goal poses: ``x``, ``y`` [m], ``theta`` [rad], each ``(B,)``; or one goal for every entry."""
     lambda_goal: float = 0.0
@@ -81,7 +82,7 @@ AnyPath = ReferencePath | PathBatch
 
 
 def point(path: AnyPath, lam: Any, ops: Ops = NUMPY) -> tuple[Any, Any, Any]:
-    """``y_P(lambda)``: ``(c1 [m], c2 [m], theta_P [rad])`` at arc length ``lam`` [m]."""
+    r"""$y_P(\lambda)$: ``(c1 [m], c2 [m], theta_P [rad])`` at arc length $\lambda$ = ``lam`` [m]."""
     k = path.curvature
     a = k * lam
     lx = lam * ops.sinc(a)
@@ -110,7 +111,7 @@ def project(path: AnyPath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
 
 
 def timing_law(path: AnyPath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY) -> Any:
-    """``lambda+ = lambda + u2 cos(theta - theta_P(lambda)) T`` (paper Sec. VI-B)."""
+    r"""$\lambda^+ = \lambda + u_2 \cos(\theta - \theta_P(\lambda))\, T$ (paper Sec. VI-B)."""
     theta_p = path.goal.theta + path.curvature * lam
     return lam + u2 * ops.cos(theta - theta_p) * dt
 
@@ -126,9 +127,9 @@ def path_error(
     ops: Ops = NUMPY,
     wrap: bool = True,
 ) -> tuple[Any, Any, Any, Any]:
-    """``e = (c1 - c1_P, c2 - c2_P, theta - theta_P, speed - v_ref)`` at arc length ``lam``.
+    r"""$e = (c_1 - c_{1,P},\, c_2 - c_{2,P},\, \theta - \theta_P,\, v - v_{ref})$ at arc length ``lam``.
 
-    ``wrap`` maps the heading error to [-pi, pi); the MPC, whose headings are unwrapped near the
+    ``wrap`` maps the heading error to $[-\pi, \pi)$; the MPC, whose headings are unwrapped near the
     path's, uses the smooth unwrapped difference.
     """
     px, py, pth = point(path, lam, ops)
@@ -141,7 +142,7 @@ def path_error(
 def path_error_vector(
     path: ReferencePath, pose: np.ndarray, speed: float, v_ref: float
 ) -> tuple[np.ndarray, float]:
-    """e_k at the closest path point of ``pose (3,)``: returns ``(e (4,), lambda)``."""
+    """$e_k$ at the closest path point of ``pose (3,)``: returns ``(e (4,), lambda)``."""
     lam = float(project(path, pose[0], pose[1]))
     e = path_error(path, pose[0], pose[1], pose[2], speed, lam, v_ref)
     return np.array(e, dtype=float), lam

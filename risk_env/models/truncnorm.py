@@ -20,7 +20,8 @@ def sample(
     rng: np.random.Generator,
     size: tuple[int, ...] = (),
 ) -> np.ndarray:
-    """Draws of N(mean, sigma^2) truncated to [lo, hi], shape ``size + broadcast shape``.
+    r"""Draws of $N(\mu, \sigma^2)$ (``mean``, ``sigma``) truncated to ``[lo, hi]``, shape ``size +
+    broadcast shape``.
 
     Inverse-CDF sampling, done on the side of the mean where the tail is thin so that far tails
     keep their precision. A zero ``sigma`` or a zero-width interval gives the clipped mean.
@@ -49,8 +50,8 @@ def transform(u: Any, mean: Any, sigma: Any, lo: Any, hi: Any, ops: Ops = NUMPY)
 def partial_moments(
     mu: Any, sigma: Any, lo: Any, hi: Any, left: Any, right: Any, ops: Ops
 ) -> tuple[Any, Any, Any]:
-    """Probability, first and second moment of X ~ N(mu, sigma^2) truncated to [lo, hi],
-    restricted to [left, right]: ``(P(X in I), E[X 1{X in I}], E[X^2 1{X in I}])``.
+    r"""Probability, first and second moment of $X \sim N(\mu, \sigma^2)$ truncated to ``[lo, hi]``,
+    restricted to $I$ = ``[left, right]``: $(P(X \in I),\, E[X\, 1\{X \in I\}],\, E[X^2\, 1\{X \in I\}])$.
 
     ``sigma`` must be positive; callers floor it.
     """

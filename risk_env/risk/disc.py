@@ -1,10 +1,11 @@
-"""The disc probability P(||q_e - q_o|| <= r) under the object's truncated 2-D Gaussian, and the
+r"""The disc probability $P(\|q_e - q_o\| \le r)$ under the object's truncated 2-D Gaussian, and the
 signed distance to its truncation box: the geometry of the exact risk
 (:class:`risk_env.risk.estimators.ExactRisk`), written once for every face of
 :mod:`risk_env.models.ops`.
 
 A belief's covariance and truncation box lie in its own frame (:attr:`Belief.frame
-<risk_env.prediction.belief.Belief.frame>`, the angle of its first axis from c1): the ego's offset is
+<risk_env.prediction.belief.Belief.frame>`,
+the angle of its first axis from c1): the ego's offset is
 turned into that frame (:func:`to_frame`), where the box is axis-aligned; the collision disc is
 rotation-invariant, so the integral there is the one of an axis-aligned belief.
 """
@@ -26,14 +27,15 @@ _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
 
 def outer_is_y(dx: Any, dy: Any, sx: Any, sy: Any, hx: Any, hy: Any, ops: Ops = NUMPY) -> Any:
-    """Whether the quadrature's outer axis is the second one (else the first), for offsets
+    r"""Whether the quadrature's outer axis is the second one (else the first), for offsets
     ``(dx, dy)`` in the belief's frame, floored spreads and half widths.
 
     Where the outer axis has its mass, the inner chord's ends sweep through the inner Gaussian at
-    (e_out / e_in) |tan t| inner spreads per outer spread, tan t growing with the outer offset
-    (|d_out| + e_out: the bulk's far side); the rule's breaks resolve the outer density, not that
-    sweep. So the outer axis is the one of the smaller ``(|d| + e) e^2``, e = min(sigma, half
-    width) the axis' effective spread: for a round belief the axis of least offset, for an
+    $(e_{out} / e_{in}) |\tan t|$ inner spreads per outer spread, $\tan t$ growing with the outer
+    offset ($|d_{out}| + e_{out}$: the bulk's far side); the rule's breaks resolve the outer density,
+    not that sweep. So the outer axis is the one of the smaller $(|d| + e)\, e^2$, with
+    $e = \min(\sigma, h)$ the axis' effective spread ($h$ its half width): for a round belief the axis
+    of least offset, for an
     elongated one mostly its narrow axis, but not where its far offset puts its mass at the
     disc's tangent."""
     ex, ey = ops.minimum(sx, hx), ops.minimum(sy, hy)
@@ -50,13 +52,15 @@ def disc_probability(
     sigma_breaks: tuple[float, ...] = SIGMA_BREAKS,
     support: float = SUPPORT,
 ) -> Any:
-    """P(||d - z|| <= radius) for z ~ truncated N(0, diag(sigma_x^2, sigma_y^2)) on the box
-    ``[-half_x, half_x] x [-half_y, half_y]`` in the belief's frame; ``(dx, dy)`` = ego centre
+    r"""$P(\|d - z\| \le r)$, $r$ = ``radius``, for $z$ a truncated Gaussian
+    $N(0, \mathrm{diag}(\sigma_x^2, \sigma_y^2))$ on the box $[-h_x, h_x] \times [-h_y, h_y]$
+    (``sigma_x``, ``sigma_y``, ``half_x``, ``half_y`` of the belief) in the belief's frame; ``(dx, dy)``
+    = ego centre
     minus object mean [m] in the world, turned into the frame here (:func:`to_frame`).
     ``sigma_breaks`` and ``support``: the rule (:mod:`risk_env.risk.quadrature`; default the env's).
 
-    One axis (the inner) is integrated in closed form with Phi, the other (the outer) by
-    Gauss-Legendre quadrature in the disc angle t (x = dx + r sin t, which removes the
+    One axis (the inner) is integrated in closed form with $\Phi$, the other (the outer) by
+    Gauss-Legendre quadrature in the disc angle $t$ ($x = d_x + r \sin t$, which removes the
     square-root ends of the chord). Three choices make the rule exact for any aspect ratio
     (within 4e-6 of nested adaptive quadrature, ``python -m benchmarks.exact_accuracy``):
 
@@ -64,10 +68,10 @@ def disc_probability(
       slowest through the inner Gaussian: for a round belief the axis of least offset (near the
       object the disc boundary runs along it, and its sharp crossing falls to the closed form),
       for an elongated one mostly its narrow axis (whose sharp density the breaks resolve);
-    - the outer range is cut to where the chord meets the inner box (``r cos t >= |dy| - hy``,
-      hy at most :data:`~risk_env.risk.quadrature.SUPPORT` inner sigmas): beyond, the chord
-      misses the box (or all but < 3e-12 of the inner mass) and P gets nothing, and near the
-      disc's tangent points the outer density, stretched in t, would otherwise be left to few
+    - the outer range is cut to where the chord meets the inner box ($r \cos t \ge |d_y| - h_y$,
+      $h_y$ at most :data:`~risk_env.risk.quadrature.SUPPORT` inner $\sigma$): beyond, the chord
+      misses the box (or all but < 3e-12 of the inner mass) and $P$ gets nothing, and near the
+      disc's tangent points the outer density, stretched in $t$, would otherwise be left to few
       nodes;
     - the outer integral is split where the box edges cut the disc and at fixed multiples of
       the outer standard deviation, with :data:`~risk_env.risk.quadrature.GAUSS_NODES` nodes each.
@@ -78,17 +82,17 @@ def disc_probability(
     edge (Leibniz's rule: the terms of a moving edge cancel between its two segments), and the
     motion of the outer range's two ends, where the integrand jumps to 0, enters through two
     extra nodes at the held ends whose weights are the ends' motion: 0 in value, Leibniz's term
-    to second order in derivatives. Each node's term is then a product of a function of dx and
-    one of dy, cheap to differentiate (figures of the earlier 4-node rule, the derivative scheme
-    unchanged): the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
+    to second order in derivatives. Each node's term is then a product of a function of $d_x$ and
+    one of $d_y$, cheap to differentiate (figures measured with a 4-node rule and the same
+    derivative scheme): the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
     instructions than through the edges (asin, acos, the sorting network), its Jacobian 46 %
     fewer (with the same rule; the SMPC's shorter rule saves 14 % more). The gradient
-    is the quadrature of P's gradient, which differs from the derivative of the rule's value by
+    is the quadrature of $P$'s gradient, which differs from the derivative of the rule's value by
     the rule's sensitivity to where its edges lie: on the plans of six closed loops (the risky
     steps, 264 of them) by 2e-5 of the gradient in the median and 1.2 % at most, and it is the
-    closer of the two to P's own gradient (median 8e-6 against 2.5e-5). A converged plan meets
+    closer of the two to $P$'s own gradient (median 8e-6 against 2.5e-5). A converged plan meets
     the constraint's value exactly and is stationary to that accuracy.
-    The Hessian is the quadrature of P's Hessian less one rank-one term per kink where a
+    The Hessian is the quadrature of $P$'s Hessian less one rank-one term per kink where a
     chord's end crosses the box's inner edge inside the range (the kink's motion: its slope
     jump times the outer product of its angle's gradient), which only shapes the solver's
     steps: with that term (8 more nodes, 20 % more instructions) the 18 closed loops of

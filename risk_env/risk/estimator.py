@@ -1,5 +1,5 @@
-"""The one interface of the collision-risk estimators, :class:`RiskEstimator`, and the helpers they
-share (:mod:`risk_env.risk` names the estimators)."""
+"""The one interface of the collision-risk estimators, :class:`RiskEstimator`, and the functions
+they share (:mod:`risk_env.risk` names the estimators)."""
 
 from __future__ import annotations
 
@@ -42,10 +42,11 @@ def floor_geometry(a: Any) -> Any:
 
 
 class RiskEstimator(ABC):
-    """R_{n|k} for ego states against the object's belief at the same prediction step.
+    r"""$R_{n|k}$ for ego states against the object's belief at the same prediction step.
 
     ``risk`` is the numpy form (batched by broadcasting); ``casadi_risk`` the symbolic one;
-    ``casadi_margin(ego, belief, epsilon)`` is >= 0 exactly when R <= epsilon, scaled for a solver.
+    ``casadi_margin(ego, belief, epsilon)`` is $\ge 0$ exactly when $R \le \epsilon$, scaled for a
+    solver.
     """
 
     name: str
@@ -61,21 +62,21 @@ class RiskEstimator(ABC):
     def _risk(self, ego: Any, belief: Belief, ops: Ops, **kwargs: Any) -> Any: ...
 
     def risk(self, ego: np.ndarray, belief: Belief, rng: np.random.Generator | None = None) -> np.ndarray:
-        """R for ``ego (..., 4)`` states: shape ``(...)`` broadcast with the belief's fields."""
+        """$R$ for ``ego (..., 4)`` states: shape ``(...)`` broadcast with the belief's fields."""
         return np.asarray(self._risk(np.asarray(ego, dtype=float), belief, NUMPY))
 
     def risk_one(self, ego: EgoFloats, belief: Belief, rng: np.random.Generator | None = None) -> float:
-        """R for one ego state ``(c1, c2, theta, v)`` of floats against a belief of floats, as a
+        """$R$ for one ego state ``(c1, c2, theta, v)`` of floats against a belief of floats, as a
         float: :meth:`risk`'s value, without its array round trip where the estimator has a
         scalar form (the single env's step)."""
         return float(self.risk(np.array(ego, dtype=float), belief, rng=rng))
 
     def casadi_risk(self, ego: ca.SX, belief: Belief, **kwargs: Any) -> ca.SX:
-        """The symbolic R for a CasADi ego vector of 4 and a belief of CasADi scalars."""
+        """The symbolic $R$ for a CasADi ego vector of 4 and a belief of CasADi scalars."""
         return self._risk(ego, belief, CASADI, **kwargs)
 
     def casadi_margin(self, ego: ca.SX, belief: Belief, epsilon: float | ca.SX, **kwargs: Any) -> ca.SX:
-        """``(epsilon - R) / scale``: >= 0 when the constraint R <= epsilon holds."""
+        r"""$(\epsilon - R) / \mathrm{scale}$: $\ge 0$ when the constraint $R \le \epsilon$ holds."""
         return (epsilon - self.casadi_risk(ego, belief, **kwargs)) / self.severity.scale
 
     def __repr__(self) -> str:

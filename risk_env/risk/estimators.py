@@ -1,14 +1,14 @@
-"""Collision risk R = E[I_C(q_e, q_o) s(v_e, v_o)] and its estimators (paper Sec. VI-C).
+r"""Collision risk $R = E[I_C(q_e, q_o)\, s(v_e, v_o)]$ and its estimators (paper Sec. VI-C).
 
 One interface, :class:`RiskEstimator`, serves the env, the agents, the tests and the benchmarks:
 
-- :class:`MonteCarloRisk`: the paper's eq. (16), the mean of I_C s over J draws;
-- :class:`ExactRisk`: positions and speed are independent, I_C uses positions only and s speeds
-  only, so R = P(||q_e - q_o|| <= r_e + r_o) E[s], the disc probability by fixed-node
-  Gauss-Legendre quadrature, E[s] in closed form (for the injury severity by fixed 1-D
+- :class:`MonteCarloRisk`: the paper's eq. (16), the mean of $I_C s$ over $J$ draws;
+- :class:`ExactRisk`: positions and speed are independent, $I_C$ uses positions only and $s$ speeds
+  only, so $R = P(\|q_e - q_o\| \le r_e + r_o)\, E[s]$, the disc probability by fixed-node
+  Gauss-Legendre quadrature, $E[s]$ in closed form (for the injury severity by fixed 1-D
   quadrature). Smooth and deterministic;
-- :class:`WorstCaseRisk`: max over the truncation box and speed interval of I_C s (eq. 17), the
-  exact box form (point-to-box distance) or the paper's L-point grid (``grid=True``).
+- :class:`WorstCaseRisk`: max over the truncation box and speed interval of $I_C s$ (eq. 17), the
+  exact box form (point-to-box distance) or the paper's $L$-point grid (``grid=True``).
 
 :class:`ExactRisk` lives here; the interface in :mod:`risk_env.risk.estimator`, the others in
 :mod:`risk_env.risk.monte_carlo` and :mod:`risk_env.risk.worst_case` (all importable from here). A belief's
@@ -60,14 +60,14 @@ scalar calls."""
 
 
 class ExactRisk(RiskEstimator):
-    """R = P(disc) E[s]: deterministic and smooth in the ego state.
+    r"""$R = P(\mathrm{disc})\, E[s]$: deterministic and smooth in the ego state.
 
-    :meth:`casadi_margin`, what the SMPC constrains, integrates P with the solver's rule: the
-    env's cut at +-5 sigma of the outer axis (:data:`~risk_env.risk.quadrature.SOLVER_SUPPORT`; 54
-    nodes, not 66, the others the same), whose P falls below the env's by at most
+    :meth:`casadi_margin`, what the SMPC constrains, integrates $P$ with the solver's rule: the
+    env's cut at $\pm 5 \sigma$ of the outer axis (:data:`~risk_env.risk.quadrature.SOLVER_SUPPORT`; 54
+    nodes, not 66, the others the same), whose $P$ falls below the env's by at most
     :data:`~risk_env.risk.quadrature.SOLVER_SHORTFALL` (5.7e-7), which it adds back wherever the disc
-    meets the box: never below the env's R, above it by at most 5.7e-7 E[s] (0.02 J for the
-    paper's severities). :meth:`casadi_risk` is the env's R itself.
+    meets the box: never below the env's $R$, above it by at most $5.7 \cdot 10^{-7} E[s]$ (0.02 J
+    for the paper's severities). :meth:`casadi_risk` is the env's $R$ itself.
     """
 
     name = "exact"
@@ -78,8 +78,8 @@ class ExactRisk(RiskEstimator):
         return p * self.severity.expected(v, th, belief, ops)
 
     def solver_risk(self, ego: ca.SX, belief: Belief) -> ca.SX:
-        """The symbolic R the SMPC constrains: P by the solver's rule plus its shortfall (where
-        the disc meets the box), times E[s]; at or above the env's R."""
+        """The symbolic $R$ the SMPC constrains: $P$ by the solver's rule plus its shortfall (where
+        the disc meets the box), times $E[s]$; at or above the env's $R$."""
         x, y, th, v = ego_parts(ego)
         dx, dy = x - belief.x, y - belief.y
         p = disc_probability(dx, dy, self.radius, belief, CASADI, False, SOLVER_SIGMA_BREAKS, SOLVER_SUPPORT)
@@ -91,12 +91,12 @@ class ExactRisk(RiskEstimator):
         return p * self.severity.expected(v, th, belief, CASADI)
 
     def casadi_margin(self, ego, belief, epsilon, **kwargs):
-        """``(epsilon - R) / scale`` with the solver's R (:meth:`solver_risk`): conservative."""
+        r"""$(\epsilon - R) / \mathrm{scale}$ with the solver's $R$ (:meth:`solver_risk`): conservative."""
         return (epsilon - self.solver_risk(ego, belief)) / self.severity.scale
 
     def risk(self, ego, belief, rng=None):
-        """As :meth:`RiskEstimator.risk`; states whose disc misses the truncation box (cut to
-        +-7 sigma, :func:`~risk_env.risk.disc.support_halves`) get exactly 0 without quadrature (the
+        r"""As :meth:`RiskEstimator.risk`; states whose disc misses the truncation box (cut to
+        $\pm 7 \sigma$, :func:`~risk_env.risk.disc.support_halves`) get exactly 0 without quadrature (the
         same value the full formula gives), the rest are integrated by
         the numpy kernels of :mod:`risk_env.risk.exact_kernel` (equal to the generic form to rounding)."""
         ego = np.asarray(ego, dtype=float)
@@ -151,7 +151,7 @@ class ExactRisk(RiskEstimator):
         return out
 
     def risk_one(self, ego, belief, rng=None):
-        """As :meth:`RiskEstimator.risk_one`: the gate and E[s] on the MATH face, P by the scalar
+        """As :meth:`RiskEstimator.risk_one`: the gate and $E[s]$ on the MATH face, $P$ by the scalar
         kernel (exactly 0 without integrating when the disc misses the truncation box). The
         offset in the belief's frame goes to the kernels, whose disc is rotation-invariant."""
         x, y, th, v = ego

@@ -1,4 +1,4 @@
-"""numpy kernels of the disc probability: :func:`risk_env.risk.estimators.disc_probability` made fast.
+r"""numpy kernels of the disc probability: :func:`risk_env.risk.estimators.disc_probability` made fast.
 
 The generic form (one definition, shared with the MPC's CasADi constraints) builds the quadrature
 from many small array operations: about 80 us for one ego state, 5 ms for 1,000. These kernels
@@ -9,13 +9,13 @@ evaluate the same integral on the same nodes (:mod:`risk_env.risk.quadrature`) a
   numpy pass over the 66 nodes;
 - :func:`disc_probability_batch`: B ego states, arrays laid out (entries, B). Before the costly
   functions run it drops what adds nothing (segments of zero width or where the chord spans the
-  inner box) and sorts the rest by how many chord ends need Phi (2, 1 or 0); sin and cos come
-  from one vectorised tan, Phi from a table (:func:`_phi_table`).
+  inner box) and sorts the rest by how many chord ends need $\Phi$ (2, 1 or 0); sin and cos come
+  from one vectorised tan, $\Phi$ from a table (:func:`_phi_table`).
 
-Both take ego-minus-mean offsets ``(dx, dy)`` [m], the radius r = r_e + r_o [m], the standard
+Both take ego-minus-mean offsets ``(dx, dy)`` [m], the radius $r = r_e + r_o$ [m], the standard
 deviations ``(sx, sy)`` [m] and the box half widths ``(hx, hy)`` [m], floored to
 :data:`~risk_env.risk.quadrature.GEOMETRY_FLOOR` by the caller, and assume that the disc meets the box
-(off it, cut to +-SUPPORT sigma, the probability is exactly 0 and callers return that without
+(off it, cut to $\pm$ ``SUPPORT`` $\sigma$, the probability is exactly 0 and callers return that without
 integrating: :func:`risk_env.risk.disc.support_halves`).
 """
 
@@ -59,7 +59,7 @@ _PHI_GAUSS = (0.5 - 0.5 / math.sqrt(3.0), 0.5 + 0.5 / math.sqrt(3.0))
 
 
 def _phi_table(u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """Phi(z) from ``u = z / _PHI_STEP + _PHI_OFFSET`` (any shape) into ``out``; beyond
+    r"""$\Phi(z)$ from ``u = z / _PHI_STEP + _PHI_OFFSET`` (any shape) into ``out``; beyond
     +-_PHI_LIM the table's end values stand in (within 5.3e-17)."""
     k = np.rint(u)
     d = np.subtract(u, k, out=u)  # (z - z0) / step
@@ -91,7 +91,7 @@ def _clip(u: float, lo: float, hi: float) -> float:
 def disc_probability_scalar(
     dx: float, dy: float, r: float, sx: float, sy: float, hx: float, hy: float
 ) -> float:
-    """P(||d - z|| <= r) for one ego state (floats in, a float out; see the module docstring)."""
+    r"""$P(\|d - z\| \le r)$ for one ego state (floats in, a float out; see the module docstring)."""
     ex, ey = min(sx, hx), min(sy, hy)
     if (abs(dx) + ex) * (ex * ex) > (abs(dy) + ey) * (ey * ey):  # risk_env.risk.disc.outer_is_y
         dx, dy, sx, sy, hx, hy = dy, dx, sy, sx, hy, hx
@@ -158,7 +158,7 @@ def disc_probability_batch(
     hx: np.ndarray | float,
     hy: np.ndarray | float,
 ) -> np.ndarray:
-    """P(||d - z|| <= r) for B ego states: ``dx, dy (B,)``; ``sx, sy, hx, hy`` each ``(B,)`` or
+    r"""$P(\|d - z\| \le r)$ for $B$ ego states: ``dx, dy (B,)``; ``sx, sy, hx, hy`` each ``(B,)`` or
     a scalar (one belief for every state); returns ``(B,)``. See the module docstring."""
     n = dx.shape[0]
     # The outer axis (risk_env.risk.disc.outer_is_y); by symmetry only |dx| and |dy| matter (dy >= 0

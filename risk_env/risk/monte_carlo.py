@@ -1,4 +1,4 @@
-"""The paper's Monte Carlo risk (eq. 16), :class:`MonteCarloRisk`: the mean of I_C s over J draws
+"""The paper's Monte Carlo risk (eq. 16), :class:`MonteCarloRisk`: the mean of $I_C s$ over $J$ draws
 of the belief (world coordinates, :meth:`~risk_env.prediction.belief.Belief.sample`), and its smoothed
 CasADi form for the SMPC."""
 
@@ -19,32 +19,32 @@ MIN_WIDTH = 1e-3
 
 
 class MonteCarloRisk(RiskEstimator):
-    """The paper's eq. (16): ``(1/J) sum_j I_C(q_e, q_o,j) s(v_e, v_o,j)``.
+    r"""The paper's eq. (16): $\frac{1}{J} \sum_j I_C(q_e, q_{o,j})\, s(v_e, v_{o,j})$.
 
-    numpy (:meth:`risk`): J draws from the passed-in generator per call, the hard indicator and the
+    numpy (:meth:`risk`): $J$ draws from the passed-in generator per call, the hard indicator and the
     severity as they are: the paper's estimator.
 
     CasADi (:meth:`casadi_risk`, for the SMPC): the draws are parameters ``samples (J, 3)`` of
     (c1, c2, v), and the sum is smoothed so that a gradient-based solver can follow it:
 
-    - the indicator ``1[d_j <= r]`` becomes the logistic ``1 / (1 + exp((d_j - r) / h))`` with a
-      width ``h = bandwidth * sqrt(sigma_x sigma_y)`` proportional to the spread of the draws (a
+    - the indicator $1[d_j \le r]$ becomes the logistic $1 / (1 + \exp((d_j - r) / h))$ with a
+      width $h = \mathrm{bandwidth} \cdot \sqrt{\sigma_x \sigma_y}$ proportional to the spread of the draws (a
       kernel bandwidth; floored at :data:`MIN_WIDTH`), or a fixed ``smoothing`` [m] if given.
-      Relative to the spacing of the draws near the disc edge, which scales with sigma too, the
+      Relative to the spacing of the draws near the disc edge, which scales with $\sigma$ too, the
       width is then the same at every step and uncertainty: wide enough that the sum is a smooth
       ramp rather than a staircase of single draws (a fixed 0.05 m is below the spacing of 500
-      draws with sigma = 6 m), narrow enough that its bias is small;
-    - the severity's kinks (the paper's ``|m_e v_e^2 - m_o v_o^2|`` has one per draw, exactly
+      draws with $\sigma$ = 6 m), narrow enough that its bias is small;
+    - the severity's kinks (the paper's $|m_e v_e^2 - m_o v_o^2|$ has one per draw, exactly
       where the SMPC likes to put the ego speed) are rounded by
-      :meth:`~risk_env.risk.severity.Severity.smooth_value`, which lies above s by at most
-      ``w = severity_smoothing * scale`` (50 J for the paper's severity).
+      :meth:`~risk_env.risk.severity.Severity.smooth_value`, which lies above $s$ by at most
+      $w = \mathrm{severity\_smoothing} \cdot \mathrm{scale}$ (50 J for the paper's severity).
 
-    Both tend to the paper's estimator as ``bandwidth``, ``severity_smoothing`` -> 0. The bias
+    Both tend to the paper's estimator as ``bandwidth``, ``severity_smoothing`` $\to 0$. The bias
     against the hard estimator on the same draws is bounded by :meth:`smoothing_bound`:
-    ``(1/J) sum_j exp(-|d_j - r| / h) s_j + w`` (the logistic differs from the step by less than
-    ``exp(-|d - r| / h)``). In expectation over the draws it is O(h^2): about
-    ``(pi^2 / 6) h^2 f_d'(r)`` in probability, ``f_d`` the density of the ego-object distance, i.e.
-    ``~0.5 bandwidth^2`` times the local probability density scale, 1e-3 for the default 0.05.
+    $\frac{1}{J} \sum_j \exp(-|d_j - r| / h)\, s_j + w$ (the logistic differs from the step by less
+    than $\exp(-|d - r| / h)$). In expectation over the draws it is $O(h^2)$: about
+    $(\pi^2 / 6)\, h^2 f_d'(r)$ in probability, $f_d$ the density of the ego-object distance, i.e.
+    about $0.5\, \mathrm{bandwidth}^2$ times the local probability density scale, 1e-3 for the default 0.05.
     """
 
     name = "monte_carlo"
@@ -73,12 +73,12 @@ class MonteCarloRisk(RiskEstimator):
 
     @property
     def severity_width(self) -> float:
-        """w [units of the severity]: the smoothed severity lies in [s, s + w]."""
+        """$w$ [units of the severity]: the smoothed severity lies in $[s, s + w]$."""
         return self.severity_smoothing * self.severity.scale
 
     def width(self, belief: Belief, ops: Ops = NUMPY) -> Any:
-        """h [m], the logistic's width at this belief: ``bandwidth * sqrt(sigma_x sigma_y)`` (at
-        least :data:`MIN_WIDTH`), or the fixed ``smoothing``."""
+        r"""$h$ [m], the logistic's width at this belief: $\mathrm{bandwidth} \cdot \sqrt{\sigma_x \sigma_y}$
+        (at least :data:`MIN_WIDTH`), or the fixed ``smoothing``."""
         if self.smoothing is not None:
             return self.smoothing
         spread = ops.sqrt(ops.maximum(belief.sigma_x, 0.0) * ops.maximum(belief.sigma_y, 0.0))
@@ -98,8 +98,8 @@ class MonteCarloRisk(RiskEstimator):
         return np.mean(hit * s, axis=0)
 
     def smoothing_bound(self, ego: np.ndarray, belief: Belief, draws: np.ndarray) -> np.ndarray:
-        """Bound on ``|smoothed - hard|`` on the same ``draws (J, ..., 3)`` [units of the severity]:
-        ``(1/J) sum_j exp(-|d_j - r| / h) s_j + w``."""
+        r"""Bound on $|\text{smoothed} - \text{hard}|$ on the same ``draws (J, ..., 3)`` [units of the
+        severity]: $\frac{1}{J} \sum_j \exp(-|d_j - r| / h)\, s_j + w$."""
         ego = np.asarray(ego, dtype=float)
         x, y, th, v = ego_parts(ego)
         draws = self._pad(draws, x)

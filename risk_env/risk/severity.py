@@ -1,14 +1,14 @@
-"""Collision severity models s(v_e, v_o), their expectation and their worst case.
+"""Collision severity models $s(v_e, v_o)$, their expectation and their worst case.
 
 Each model gives, written once for numpy and CasADi:
 
-- ``value``: s for one object speed (Monte Carlo);
-- ``expected``: E[s] when the object speed is a truncated Gaussian (exact estimator);
-- ``worst``: max of s over a set of object speeds (robust estimators), given the set's end points
+- ``value``: $s$ for one object speed (Monte Carlo);
+- ``expected``: $E[s]$ when the object speed is a truncated Gaussian (exact estimator);
+- ``worst``: max of $s$ over a set of object speeds (robust estimators), given the set's end points
   and its element nearest to 0.
 
 Speeds are signed, along each vehicle's heading [m/s]; headings [rad]; severities in J, except
-the probability model (s = 1, dimensionless) and the injury model (expected number of seriously
+the probability model ($s = 1$, dimensionless) and the injury model (expected number of seriously
 injured people).
 """
 
@@ -31,25 +31,25 @@ class Severity(ABC):
 
     name: str
     unit: str = "J"
-    """The unit of s, as tables name it."""
+    """The unit of $s$, as tables name it."""
 
     @abstractmethod
     def value(self, v_e: Any, th_e: Any, v_o: Any, th_o: Any, ops: Ops) -> Any:
-        """s at ego speed ``v_e`` and object speed ``v_o``."""
+        """$s$ at ego speed ``v_e`` and object speed ``v_o``."""
 
     def smooth_value(self, v_e: Any, th_e: Any, v_o: Any, th_o: Any, ops: Ops, width: float) -> Any:
-        """s with its kinks rounded for a gradient-based solver: between ``value`` and
-        ``value + width`` [units of s], equal to ``value`` for ``width = 0``. Models that are smooth
+        """$s$ with its kinks rounded for a gradient-based solver: between ``value`` and
+        ``value + width`` [units of $s$], equal to ``value`` for ``width = 0``. Models that are smooth
         already return ``value``."""
         return self.value(v_e, th_e, v_o, th_o, ops)
 
     @abstractmethod
     def expected(self, v_e: Any, th_e: Any, belief: Any, ops: Ops) -> Any:
-        """E[s] over the belief's truncated-Gaussian speed."""
+        """$E[s]$ over the belief's truncated-Gaussian speed."""
 
     @abstractmethod
     def worst(self, v_e: Any, th_e: Any, v_lo: Any, v_hi: Any, v_near0: Any, th_o: Any, ops: Ops) -> Any:
-        """max of s over object speeds in a set with end points ``v_lo, v_hi`` and element
+        """max of $s$ over object speeds in a set with end points ``v_lo, v_hi`` and element
         ``v_near0`` closest to 0."""
 
     @property
@@ -59,13 +59,13 @@ class Severity(ABC):
 
     @property
     def upper_bound(self) -> float:
-        """The least upper bound of s [units of s] (inf if unbounded): no risk, and so no
+        """The least upper bound of $s$ [units of $s$] (inf if unbounded): no risk, and so no
         sensible tolerance, exceeds it."""
         return math.inf
 
 
 class PaperSeverity(Severity):
-    """The paper's differential kinetic energy ``s = 0.5 |m_e v_e^2 - m_o v_o^2|`` [J] (eq. 13).
+    r"""The paper's differential kinetic energy $s = \frac{1}{2} |m_e v_e^2 - m_o v_o^2|$ [J] (eq. 13).
 
     It vanishes when the kinetic energies match, whatever the directions.
     """
@@ -103,7 +103,7 @@ class PaperSeverity(Severity):
 
 
 class PlasticSeverity(Severity):
-    """Energy lost in a perfectly plastic impact, ``0.5 m_e m_o/(m_e+m_o) |v_e - v_o|^2`` [J],
+    r"""Energy lost in a perfectly plastic impact, $\frac{1}{2} \frac{m_e m_o}{m_e + m_o} |v_e - v_o|^2$ [J],
     with velocity vectors along each heading: zero only when the velocities are equal."""
 
     name = "plastic"
@@ -156,14 +156,15 @@ INJURY_NODES = 5
 """Gauss-Legendre nodes per segment of the injury severity's expectation."""
 _INJURY_X, _INJURY_W = np.polynomial.legendre.leggauss(INJURY_NODES)
 INJURY_BREAKS = (-5.0, -2.5, -1.0, 0.0, 1.0, 2.5, 5.0)
-"""Where the injury expectation's quadrature splits around the speed density's mode: where the
-density has fallen by ``exp(-k^2 / 2)``, which is ``k`` standard deviations for a mean inside the
+r"""Where the injury expectation's quadrature splits around the speed density's mode: where the
+density has fallen by $\exp(-k^2 / 2)$, which is $k$ standard deviations for a mean inside the
 truncation interval."""
 INJURY_SUPPORT = 7.0
-"""The quadrature ends where the density has fallen by ``exp(-INJURY_SUPPORT^2 / 2)`` (< 3e-11)."""
+r"""The quadrature ends where the density has fallen by $\exp(-k^2 / 2)$, $k$ = ``INJURY_SUPPORT``
+(< 3e-11)."""
 KINK_GRADING = (1.0, 4.0, 16.0)
-"""Further splits at the least relative speed's object speed +- these multiples of the width of
-its rounding: the relative speed is ``sqrt((v_o - p)^2 + q^2)``, a kink of width ``|q|``."""
+r"""Further splits at the least relative speed's object speed $\pm$ these multiples of the width of
+its rounding: the relative speed is $\sqrt{(v_o - p)^2 + q^2}$, a kink of width $|q|$."""
 
 
 _BREAKS = np.array(INJURY_BREAKS)
@@ -174,21 +175,22 @@ _INJURY_WS = np.tile(_INJURY_W, _INJURY_SEGMENTS)
 
 
 class InjurySeverity(Severity):
-    """Expected number of seriously (MAIS3+) injured people in the collision [injuries].
+    r"""Expected number of seriously (MAIS3+) injured people in the collision [injuries].
 
     The relative speed is the norm of the difference of the velocity vectors along each heading,
-    ``w = |v_e e(th_e) - v_o e(th_o)|`` [m/s]. A perfectly plastic impact (momentum conserved,
-    one common velocity afterwards) changes each party's velocity by ``delta_v_e = m_o/(m_e+m_o) w``
-    and ``delta_v_o = m_e/(m_e+m_o) w``. Each party is seriously injured with the probability
-    ``p(dv) = 1 / (1 + exp(-(beta0 + beta1 dv)))`` (Geisslinger et al., "An ethical trajectory
+    $w = |v_e\, e(\theta_e) - v_o\, e(\theta_o)|$ [m/s]. A perfectly plastic impact (momentum
+    conserved, one common velocity afterwards) changes each party's velocity by
+    $\Delta v_e = \frac{m_o}{m_e + m_o} w$ and $\Delta v_o = \frac{m_e}{m_e + m_o} w$. Each party is
+    seriously injured with the probability $p(\Delta v) = 1 / (1 + \exp(-(\beta_0 + \beta_1 \Delta v)))$
+    (Geisslinger et al., "An ethical trajectory
     planning algorithm for autonomous vehicles", Nature Machine Intelligence 2023, the model without
-    impact angle; ``scenario.injury_beta0``, ``injury_beta1``), so ``s = p(delta_v_e) +
-    p(delta_v_o)``. s lies in (0, 2) and grows with w; no collision is free (``2 p(0)`` = 0.020
-    with the default coefficients).
+    impact angle; ``scenario.injury_beta0``, ``injury_beta1``), so
+    $s = p(\Delta v_e) + p(\Delta v_o)$. $s$ lies in $(0, 2)$ and grows with $w$; no collision is free
+    ($2 p(0) = 0.020$ with the default coefficients).
 
-    With ``e(th) = (cos th, sin th)`` and ``d = th_e - th_o``: ``w^2 = (v_o - p)^2 + q^2``,
-    ``p = v_e cos d``, ``q = v_e sin d``, so w is convex in v_o, least at ``v_o = p`` and has a
-    kink there when the headings are parallel (q = 0).
+    With $e(\theta) = (\cos \theta, \sin \theta)$ and $d = \theta_e - \theta_o$:
+    $w^2 = (v_o - p)^2 + q^2$, $p = v_e \cos d$, $q = v_e \sin d$, so $w$ is convex in $v_o$, least
+    at $v_o = p$ and has a kink there when the headings are parallel ($q = 0$).
     """
 
     name = "injury"
@@ -204,21 +206,21 @@ class InjurySeverity(Severity):
         self.beta0, self.beta1 = float(beta0), float(beta1)
 
     def of_speed(self, w: Any, ops: Ops) -> Any:
-        """s at the relative speed ``w`` [m/s]: the two parties' injury probabilities."""
+        """$s$ at the relative speed ``w`` [m/s]: the two parties' injury probabilities."""
         b0, b1 = self.beta0, self.beta1
         p_e = 1.0 / (1.0 + ops.exp(-(b0 + b1 * self.share_e * w)))
         p_o = 1.0 / (1.0 + ops.exp(-(b0 + b1 * self.share_o * w)))
         return p_e + p_o
 
     def _of_square(self, w2: Any, ops: Ops) -> Any:
-        """s at the squared relative speed ``w2`` [m^2/s^2]. At w = 0, the norm's cone point, the
+        """$s$ at the squared relative speed ``w2`` [m^2/s^2]. At $w = 0$, the norm's cone point, the
         gradient is taken as 0 (finite in every face)."""
         positive = w2 > 0.0
         return self.of_speed(ops.where(positive, ops.sqrt(ops.where(positive, w2, 1.0)), 0.0 * w2), ops)
 
     @staticmethod
     def _split(v_e: Any, th_e: Any, th_o: Any, ops: Ops) -> tuple[Any, Any]:
-        """``(p, q)`` [m/s] with ``w^2 = (v_o - p)^2 + q^2``."""
+        """``(p, q)`` [m/s] with $w^2 = (v_o - p)^2 + q^2$."""
         d = th_e - th_o
         return v_e * ops.cos(d), v_e * ops.sin(d)
 
@@ -237,9 +239,9 @@ class InjurySeverity(Severity):
         return self.of_speed(ops.sqrt((v_o - p) * (v_o - p) + q * q + c * c), ops)
 
     def expected(self, v_e, th_e, belief, ops):
-        """E[s] over the truncated-Gaussian object speed by fixed Gauss-Legendre quadrature in
-        ``z = (v_o - mean) / sigma``: from the truncated density's mode to where it has fallen by
-        ``exp(-INJURY_SUPPORT^2 / 2)``, within the truncation interval; split at
+        r"""$E[s]$ over the truncated-Gaussian object speed by fixed Gauss-Legendre quadrature in
+        $z = (v_o - \mu) / \sigma$: from the truncated density's mode to where it has fallen by
+        $\exp(-k^2 / 2)$, $k$ = :data:`INJURY_SUPPORT`, within the truncation interval; split at
         :data:`INJURY_BREAKS` around the mode, at the least relative speed and around it
         (:data:`KINK_GRADING`); :data:`INJURY_NODES` nodes per segment; normalised by the
         quadrature's own mass, so a constant severity comes out exactly. Within 1e-8 of adaptive
@@ -305,8 +307,8 @@ def make_severity(scenario: Scenario) -> Severity:
 
 
 def check_tolerance(value: float, severity: str, what: str = "tolerance") -> float:
-    """``value`` as a per-step risk bound in the unit of the severity named ``severity``: finite,
-    >= 0 and at most the severity's :attr:`~Severity.upper_bound` (a probability above 1 or more
+    r"""``value`` as a per-step risk bound in the unit of the severity named ``severity``: finite,
+    $\ge 0$ and at most the severity's :attr:`~Severity.upper_bound` (a probability above 1 or more
     than 2 injuries per step is a value in another unit). Raises ``ValueError`` naming it."""
     model = make_severity(Scenario(severity=severity))
     value = float(value)

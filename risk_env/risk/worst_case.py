@@ -1,4 +1,4 @@
-"""The worst-case risk (paper eq. 17), :class:`WorstCaseRisk`: the maximum of I_C s over the
+"""The worst-case risk (paper eq. 17), :class:`WorstCaseRisk`: the maximum of $I_C s$ over the
 truncation box (in the belief's frame) and the speed interval, exactly or on the paper's grid."""
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ from risk_env.scenario.scenario import Scenario
 
 
 class WorstCaseRisk(RiskEstimator):
-    """``max I_C s`` over the truncation box and speed interval (paper eq. 17); the box and its grid
+    r"""$\max I_C s$ over the truncation box and speed interval (paper eq. 17); the box and its grid
     lie in the belief's frame.
 
-    Exact box form (default): [signed distance to the box <= r] times the worst severity over the
-    speed interval. ``grid=True``: the paper's under-approximation on L points per interval
-    (L = ``scenario.grid_points``), evaluated through the nearest grid point per axis, which
-    equals the brute-force maximum over the L^3 grid.
+    Exact box form (default): $1[\text{signed distance to the box} \le r]$ times the worst severity
+    over the speed interval. ``grid=True``: the paper's under-approximation on $L$ points per
+    interval ($L$ = ``scenario.grid_points``), evaluated through the nearest grid point per axis,
+    which equals the brute-force maximum over the $L^3$ grid.
     """
 
     smooth = False
@@ -74,7 +74,8 @@ class WorstCaseRisk(RiskEstimator):
         return float(self._risk(ego, belief, MATH))
 
     def casadi_margin(self, ego, belief, epsilon, **kwargs):
-        """``max(distance - r [m], (epsilon - s_worst) / scale) >= 0``: keep the ego disc off
+        r"""$\max(d - r, (\epsilon - s_{worst}) / \mathrm{scale}) \ge 0$, $d$ the distance [m]: keep the
+        ego disc off
         every possible object position, unless even the worst severity is tolerable."""
         clearance = self.distance(ego, belief, CASADI) - self.radius
         slack = (epsilon - self.worst_severity(ego, belief, CASADI)) / self.severity.scale

@@ -24,7 +24,7 @@ def set_numbers(owner: Any, prefix: str, names: tuple[str, ...]) -> None:
 
 @dataclass(frozen=True)
 class Pose:
-    """A planar configuration ``y = (c1, c2, theta)``."""
+    r"""A planar configuration $y = (c_1, c_2, \theta)$."""
 
     x: float
     """c1 position [m]."""
@@ -60,11 +60,11 @@ class Ego:
     start: Pose = Pose(-10.0, 10.0, 0.0)
     """Initial configuration ``(c1 [m], c2 [m], theta [rad])``; the ego starts at rest."""
     radius: float = 1.5
-    """Disc radius r_e [m]."""
+    """Disc radius $r_e$ [m]."""
     mass: float = 1000.0
-    """Mass m_e [kg]."""
+    """Mass $m_e$ [kg]."""
     v_ref: float = 4.0
-    """Reference speed v_ref [m/s] (the appendix says 3, the velocity figure converges to 4)."""
+    """Reference speed $v_{ref}$ [m/s] (the appendix says 3, the velocity figure converges to 4)."""
     initial_input: tuple[float, float] = (0.0, 0.0)
     """Input ``(v [m/s], omega [rad/s])`` applied before the first step."""
     v_min: float = -4.0
@@ -74,9 +74,9 @@ class Ego:
     omega_max: float = 0.8
     """Largest turn-rate magnitude [rad/s]."""
     accel_max: float = 3.0
-    """Largest speed change per second [m/s^2] (a rate limit on v)."""
+    """Largest speed change per second [m/s^2] (a rate limit on $v$)."""
     omega_rate_max: float = 1.6
-    """Largest turn-rate change per second [rad/s^2] (a rate limit on omega)."""
+    r"""Largest turn-rate change per second [rad/s^2] (a rate limit on $\omega$)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", Pose.of(self.start, "ego.start"))
@@ -104,20 +104,21 @@ class Ego:
 
 @dataclass(frozen=True)
 class Uncertainty:
-    """How an object's prediction spreads over the horizon (paper Sec. VI-C, Table I).
+    r"""How an object's prediction spreads over the horizon (paper Sec. VI-C, Table I).
 
-    At prediction step n the object's position and speed follow independent truncated Gaussians
-    centred on the predicted mean, with standard deviations ``sigma0 + n * sigma_growth`` and a
-    truncation box ``mean +- (box_half_width0 + n * box_growth)``; the speed is truncated to
-    ``[v_lo0 - n dv, v_hi0 + n dv]``.
+    At prediction step $n$ the object's position and speed follow independent truncated Gaussians
+    centred on the predicted mean $\mu_n$, with standard deviations $\Sigma_0 + n Q$ (``sigma0``,
+    ``sigma_growth``) and a truncation box $\mu_n \pm (b_0 + n \Delta)$ (``box_half_width0``,
+    ``box_growth``); the speed is truncated to $[v_{min} - n \Delta_v,\ v_{max} + n \Delta_v]$
+    (``velocity_bounds0``).
     """
 
     sigma_growth: tuple[float, float, float] = (0.1, 0.1, 0.1)
-    """Q: added standard deviation per step for (c1 [m], c2 [m], v [m/s])."""
+    """$Q$: added standard deviation per step for (c1 [m], c2 [m], v [m/s])."""
     box_growth: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    """Delta: truncation growth per step and side for (c1 [m], c2 [m], v [m/s])."""
+    r"""$\Delta$: truncation growth per step and side for (c1 [m], c2 [m], v [m/s])."""
     sigma0: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Sigma_0: standard deviations at the measurement (c1 [m], c2 [m], v [m/s])."""
+    r"""$\Sigma_0$: standard deviations at the measurement (c1 [m], c2 [m], v [m/s])."""
     box_half_width0: tuple[float, float] = (0.0, 0.0)
     """Half widths of the position truncation box at the measurement (c1 [m], c2 [m])."""
     velocity_bounds0: tuple[float, float] = (-5.0, 5.0)
@@ -166,13 +167,13 @@ class CrossingObject:
     start: Pose = Pose(5.0, -5.0, math.pi / 2)
     """Initial configuration ``(c1 [m], c2 [m], theta [rad])``."""
     speed: float = 3.0
-    """Constant speed input v_o [m/s]."""
+    """Constant speed input $v_o$ [m/s]."""
     turn_rate: float = 1e-4
-    """Constant turn-rate input omega_o [rad/s]."""
+    r"""Constant turn-rate input $\omega_o$ [rad/s]."""
     radius: float = 1.5
-    """Disc radius r_o [m]."""
+    """Disc radius $r_o$ [m]."""
     mass: float = 1000.0
-    """Mass m_o [kg]."""
+    """Mass $m_o$ [kg]."""
     uncertainty: Uncertainty | None = None
     """Its own prediction spread; None (default): the scenario's ``uncertainty``."""
 
@@ -196,18 +197,18 @@ def check_object(obj: CrossingObject, prefix: str) -> None:
 
 @dataclass(frozen=True)
 class ReferencePath:
-    """A constant-curvature arc ending at the goal pose (paper appendix).
+    r"""A constant-curvature arc ending at the goal pose (paper appendix).
 
-    ``y_P(lambda)`` for arc length lambda <= 0 ends at ``goal`` for lambda = 0; with the goal
-    heading 0: ``c1 = gx + sin(kappa l)/kappa``, ``c2 = gy + (1 - cos(kappa l))/kappa``.
+    $y_P(\lambda)$ for arc length $\lambda \le 0$ ends at ``goal`` for $\lambda = 0$; with the goal
+    heading 0: $c_1 = g_x + \sin(\kappa \lambda)/\kappa$, $c_2 = g_y + (1 - \cos(\kappa \lambda))/\kappa$.
     """
 
     goal: Pose = Pose(65.0, 5.0, 0.0)
-    """Goal configuration y_P(lambda_g) [m, m, rad]."""
+    r"""Goal configuration $y_P(\lambda_g)$ [m, m, rad]."""
     curvature: float = 0.003
-    """kappa [1/m]; positive turns left, 0 is a straight line."""
+    r"""$\kappa$ [1/m]; positive turns left, 0 is a straight line."""
     lambda_start: float = -95.0
-    """lambda_0 [m]: the arc length of the path's first point; the goal is at lambda_g = 0."""
+    r"""$\lambda_0$ [m]: the arc length of the path's first point; the goal is at $\lambda_g = 0$."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "goal", Pose.of(self.goal, "path.goal"))
@@ -222,5 +223,5 @@ class ReferencePath:
 
     @property
     def lambda_goal(self) -> float:
-        """lambda_g [m]: always 0, the goal's arc length."""
+        r"""$\lambda_g$ [m]: always 0, the goal's arc length."""
         return 0.0

@@ -45,16 +45,16 @@ def object_label(index: int, count: int) -> str:
 
 
 def observation_reach(scenario: Scenario) -> Reach:
-    """The largest magnitude each part of an observation can take within ``max_steps`` steps,
+    r"""The largest magnitude each part of an observation can take within ``max_steps`` steps,
     with the bound of the observation Box, the unit and the fields that set it:
     ``{part: (reach, bound, unit, fields)}``; the object parts once per object (``"object
     position"`` for a single object, ``"objects[1] position"`` for the second of several).
 
-    Worst cases, for either object motion: the ego moves at most ``max(|v_min|, |v_max|) dt``
-    per step; an object at most ``V dt`` plus its one-step truncation half width per axis,
-    with V its speed or, sampled, the edge of its one-step speed interval; the closest path
-    point of a point at distance D from the goal lies within arc length pi D of it (its chord
-    is at most 2 D), so the arc length and the position error are at most pi D. Actions may
+    Worst cases, for either object motion: the ego moves at most $\max(|v_{min}|, |v_{max}|)\, dt$
+    per step; an object at most $V dt$ plus its one-step truncation half width per axis,
+    with $V$ its speed or, sampled, the edge of its one-step speed interval; the closest path
+    point of a point at distance $D$ from the goal lies within arc length $\pi D$ of it (its chord
+    is at most $2 D$), so the arc length and the position error are at most $\pi D$. Actions may
     exceed the limits by :func:`risk_env.checks.slack`.
     """
     s = scenario

@@ -47,7 +47,7 @@ from risk_env.scenario.scenes import scene_objects
 SeverityName = Literal["paper", "plastic", "probability", "injury"]
 SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability", "injury")
 RISK_TOLERANCES: tuple[float, ...] = (0.0, 500.0, 1000.0, 1500.0, 2000.0, 2500.0)
-"""The paper's risk tolerances epsilon [J] (Table II)."""
+r"""The paper's risk tolerances $\epsilon$ [J] (Table II)."""
 RISK_BOUNDS: Mapping[str, tuple[float, str]] = {
     "paper": (math.inf, "J"),
     "plastic": (math.inf, "J"),
@@ -91,9 +91,9 @@ class Scenario:
     horizon: int = 6
     """Prediction horizon N [steps]."""
     cost_weights: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
-    """Diagonal of W for the stage cost e' W e over (c1 [m], c2 [m], theta [rad], v [m/s])."""
+    """Diagonal of $W$ for the stage cost $e^T W e$ over (c1 [m], c2 [m], theta [rad], v [m/s])."""
     risk_tolerance: float = 0.0
-    """epsilon: the bound on the risk [units of the severity: J for the paper's]."""
+    r"""$\epsilon$: the bound on the risk [units of the severity: J for the paper's]."""
     severity: SeverityName = "paper"
     """Severity model: ``"paper"`` (differential kinetic energy), ``"plastic"`` (energy lost in a
     perfectly plastic impact, with velocity vectors), ``"probability"`` (s = 1) or ``"injury"``
@@ -170,12 +170,12 @@ class Scenario:
 
     @property
     def collision_distance(self) -> float:
-        """r_e + r_o [m] of the first object: the centre distance at or below which the discs touch."""
+        """$r_e + r_o$ [m] of the first object: the centre distance at or below which the discs touch."""
         return self.ego.radius + self.objects[0].radius
 
     @property
     def collision_distances(self) -> tuple[float, ...]:
-        """r_e + r_o,i [m] of each object i."""
+        """$r_e + r_{o,i}$ [m] of each object $i$."""
         return tuple(self.ego.radius + o.radius for o in self.objects)
 
     def for_object(self, index: int) -> Scenario:
