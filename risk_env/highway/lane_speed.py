@@ -3,7 +3,8 @@
 Each road user's route hypothesis (an *agent*: one vehicle on one
 :class:`~risk_env.highway.lane_routes.Route`) moves along its route's centreline with the
 longitudinal model of highway-env's ``IDMVehicle`` (``vehicle/behavior.py``) and the yielding rule
-of its ``RegulatedRoad`` (``road/regulation.py``), with the numbers of :class:`TrafficModel` (those ``intersection-v2`` gives its traffic):
+of its ``RegulatedRoad`` (``road/regulation.py``), with the numbers of :class:`TrafficModel` (those
+``intersection-v2`` gives its traffic):
 
 - **IDM**: ``a = A (1 - (max(v, 0) / v0)^delta) - A (d* / d)^2``, ``d* = d0 + v tau + v dv /
   (2 sqrt(A B))``, clipped to ``+- a_max``; ``d`` and ``dv`` come from the leader, found as
