@@ -48,6 +48,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from risk_env import checks
 from risk_env import observation as layout
 from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
 from risk_env.highway.control import highway_action
@@ -159,6 +160,11 @@ class IntersectionAdapter:
         slots: int = DEFAULT_SLOTS,
         **overrides: Any,
     ) -> None:
+        if not callable(make_agent):
+            raise TypeError(
+                "make_agent must be callable, Scenario -> agent (e.g. RMPC or"
+                f" functools.partial(SMPC, risk='exact')), got {checks.describe(make_agent)}"
+            )
         self.env = env
         base = unwrapped_highway(env)
         self._check_config(base)
@@ -170,6 +176,7 @@ class IntersectionAdapter:
         self.destination = destination or base.config.get("destination")
         if not self.destination:
             raise ValueError("no destination: pass destination= or set the env's config['destination']")
+        switch_ahead = checks.real("switch_ahead", switch_ahead)
         if not (math.isfinite(switch_ahead) and switch_ahead >= 0):
             raise ValueError(f"switch_ahead must be >= 0 [m], got {switch_ahead!r}")
         self.switch_ahead = float(switch_ahead)
@@ -178,9 +185,7 @@ class IntersectionAdapter:
         self.route: RoutePath | None = None
         self.lane = 0
         """Index in :attr:`route` of the lane being followed."""
-        if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
-            raise ValueError(f"slots must be an integer >= 1, got {slots!r}")
-        self.slots = slots
+        self.slots = checks.integer("slots", slots, minimum=1)
         self.last_objects = np.zeros((0, 5))
         """Measurements ``(m, 5)``, m <= :attr:`slots`, of the vehicles planned against at the last
         step, nearest first."""
