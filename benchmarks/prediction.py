@@ -105,14 +105,11 @@ def record_episode(env: Any, seed: int) -> list[dict[str, Any]]:
 def _inside(mode: Any, n: int, point: np.ndarray) -> tuple[bool, float]:
     """Whether ``point`` lies in ``mode``'s truncation box at step ``n`` (in its frame), and the
     box's area [m^2]."""
-    from risk_env.highway.lanes import mode_frame
+    from risk_env.models.frame import to_frame
 
-    b = mode.beliefs
-    frame = float(mode_frame(mode)[n])
-    dx, dy = point[0] - float(b.x[n]), point[1] - float(b.y[n])
-    c, s = np.cos(frame), np.sin(frame)
-    along, across = c * dx + s * dy, c * dy - s * dx
-    hx, hy = float(b.half_x[n]), float(b.half_y[n])
+    b = mode.beliefs[n]
+    along, across = to_frame(point[0] - float(b.x), point[1] - float(b.y), float(b.frame))
+    hx, hy = float(b.half_x), float(b.half_y)
     return bool(abs(along) <= hx and abs(across) <= hy), 4.0 * hx * hy
 
 

@@ -32,14 +32,12 @@ COLORS = plt.get_cmap("tab10").colors
 
 def _box(mode: Any, n: int) -> np.ndarray:
     """The corners ``(4, 2)`` [m] of ``mode``'s truncation box at step ``n``, in its frame."""
-    from risk_env.highway.lanes import mode_frame
+    from risk_env.models.frame import from_frame
 
-    b = mode.beliefs
-    frame = float(mode_frame(mode)[n])
-    c, s = np.cos(frame), np.sin(frame)
-    hx, hy = float(b.half_x[n]), float(b.half_y[n])
-    local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    return np.array([float(b.x[n]), float(b.y[n])]) + local @ np.array([[c, s], [-s, c]])
+    b = mode.beliefs[n]
+    hx, hy = float(b.half_x), float(b.half_y)
+    dx, dy = from_frame(np.array([-hx, hx, hx, -hx]), np.array([-hy, -hy, hy, hy]), float(b.frame))
+    return np.column_stack([float(b.x) + dx, float(b.y) + dy])
 
 
 def _road(ax: Any, network: Any) -> None:

@@ -1,7 +1,7 @@
 """The lane predictor's beliefs: truncated Gaussians in the lane's frame around each mode's mean.
 
 A mode's belief at step n (:func:`mode_beliefs`) lies in a frame of its route's heading
-(:attr:`LaneMode.frame <risk_env.highway.lanes.LaneMode.frame>`): the heading at the mean, or at
+(:attr:`Belief.frame <risk_env.prediction.belief.Belief.frame>`): the heading at the mean, or at
 the middle of the stretch of the route the road user can reach (on a circular lane, the direction
 of that stretch's chord), whichever gives the smaller box:
 
@@ -76,8 +76,8 @@ def mode_beliefs(
     dt: float,
     a_max: float,
     lateral_time: float,
-) -> tuple[Belief, np.ndarray]:
-    """The beliefs (fields ``(N+1,)``) of one mode and their frames [rad] ``(N+1,)``.
+) -> Belief:
+    """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
 
     ``route``: the geometry (the mode's most likely route); ``s``, ``v``: ``(R, N+1)`` arc lengths
     [m] and speeds [m/s] of the mode's routes (same arc length along their shared lanes), ``share``:
@@ -113,10 +113,10 @@ def mode_beliefs(
     v_lo = np.minimum(v.min(axis=0), np.maximum(speed - a_max * t, min(speed, 0.0)))
     v_hi = np.maximum(v.max(axis=0), np.minimum(speed + a_max * t, max(limit, speed)))
     sigma_v = spread.sigma_speed + spread.sigma_accel * t
-    belief = lane_belief(
-        mean[:, 0], mean[:, 1], frame, v_mean, sigma_x, sigma_y, sigma_v, half_x, half_y, v_lo, v_hi
+    heading = route.heading(s_mean)
+    return lane_belief(
+        mean[:, 0], mean[:, 1], heading, v_mean, sigma_x, sigma_y, sigma_v, half_x, half_y, v_lo, v_hi, frame
     )
-    return belief, frame
 
 
 def lane_belief(
@@ -131,11 +131,10 @@ def lane_belief(
     half_across: Any,
     v_lo: Any,
     v_hi: Any,
+    frame: Any,
 ) -> Belief:
-    """A :class:`~risk_env.prediction.belief.Belief` in the lane's frame, turned by ``heading``
-    [rad] from the world's axes: ``sigma_along``/``half_along`` along the lane, ``sigma_across``/
-    ``half_across`` across it. The frame travels in :attr:`LaneMode.frame
-    <risk_env.highway.lanes.LaneMode.frame>` until the belief has a field of its own for it."""
-    return Belief(
-        x, y, heading, speed, sigma_along, sigma_across, sigma_v, half_along, half_across, v_lo, v_hi
-    )
+    """A :class:`~risk_env.prediction.belief.Belief` with mean heading ``heading`` [rad] in the
+    frame turned by ``frame`` [rad] from the world's axes: ``sigma_along``/``half_along`` along
+    that frame's first axis (the lane), ``sigma_across``/``half_across`` across it."""
+    spread = (sigma_along, sigma_across, sigma_v, half_along, half_across, v_lo, v_hi)
+    return Belief(x, y, heading, speed, *spread, frame=frame)

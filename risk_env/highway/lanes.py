@@ -18,7 +18,8 @@ network (never a vehicle's route, destination or target lane):
   highway-env's IDM behind the leader found as highway-env finds it and its intersection's
   yielding rule, every road user of the scene together (:meth:`LanePredictor.predict_scene`); the
   lateral offset decays to the centreline. A mode's mean is the weighted mean of its routes'.
-- **Spread**, in the lane's frame (the route's heading at the mode's mean, :attr:`LaneMode.frame`):
+- **Spread** (:mod:`~risk_env.highway.lane_beliefs`), in the lane's frame (the belief's ``frame``:
+  the route's heading at the mode's mean, or at the middle of its reachable stretch):
   along the lane the truncation box reaches from full braking (``a_max``, to a stop) to full
   acceleration up to the speed limit, and at least to every route's own mean, plus ``margin_along``;
   it is the box around the mean that holds the centreline between those two ends (on a curve it
@@ -57,21 +58,14 @@ lies between the turns."""
 
 @dataclass(frozen=True)
 class LaneMode(Mode):
-    """A :class:`~risk_env.prediction.mixture.Mode` of the lane predictor: ``beliefs`` lie in the
-    frame turned by :attr:`frame` from the world's axes (``sigma_x``/``half_x`` along the lane,
+    """A :class:`~risk_env.prediction.mixture.Mode` of the lane predictor, with the routes it stands
+    for; its beliefs lie in the lane's frame (:attr:`Belief.frame
+    <risk_env.prediction.belief.Belief.frame>`: ``sigma_x``/``half_x`` along the lane,
     ``sigma_y``/``half_y`` across it)."""
 
-    frame: Any = 0.0
-    """``(N+1,)`` angle [rad] of the belief's first axis from c1 at each step (the lane's heading)."""
     routes: tuple[tuple[str, float], ...] = ()
     """The routes this mode stands for, ``(label, weight)``, labels as :meth:`Route.label
     <risk_env.highway.lane_routes.Route.label>`; their weights sum to the mode's."""
-
-
-def mode_frame(mode: Mode) -> np.ndarray:
-    """The frame angles [rad] of ``mode``'s beliefs, ``(N+1,)``: 0 for the world's axes."""
-    frame = getattr(mode.beliefs, "frame", getattr(mode, "frame", 0.0))
-    return np.broadcast_to(np.asarray(frame, dtype=float), np.shape(mode.beliefs.x)).copy()
 
 
 @dataclass
@@ -322,7 +316,7 @@ class LanePredictor(Predictor):
             total = float(w.sum())
             lead = group[int(np.argmax(w))]
             share = w / total if total > 0 else np.full(len(group), 1.0 / len(group))
-            beliefs, frame = mode_beliefs(
+            beliefs = mode_beliefs(
                 self.spread,
                 hyp.routes[lead],
                 s[group],
@@ -336,6 +330,6 @@ class LanePredictor(Predictor):
                 self.traffic.lateral_time,
             )
             routes = tuple((hyp.routes[k].label(), float(hyp.weights[k])) for k in group)
-            modes.append((total, beliefs, label, frame, routes))
+            modes.append((total, beliefs, label, routes))
         norm = sum(m[0] for m in modes)
-        return Mixture(tuple(LaneMode(w / norm, b, label, frame=f, routes=r) for w, b, label, f, r in modes))
+        return Mixture(tuple(LaneMode(w / norm, b, label, routes=r) for w, b, label, r in modes))
