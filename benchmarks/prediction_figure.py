@@ -41,7 +41,7 @@ def _box(mode: Any, n: int) -> np.ndarray:
 
 
 def _road(ax: Any, network: Any) -> None:
-    from risk_env.highway.lane_routes import lane_points
+    from risk_env.highway.lanes.routes import lane_points
 
     for lane in network.lanes_list():
         s = np.linspace(0.0, float(lane.length), 60)
@@ -63,16 +63,19 @@ def _vehicle(ax: Any, m: np.ndarray, color: str) -> None:
 
 
 def draw(
-    seed: int, duration: float, names: list[str], uncertainty: str, threshold: float, path: Path
+    steps: list[dict[str, Any]],
+    network: Any,
+    predictors: dict[str, Any],
+    horizon: int,
+    threshold: float,
+    seed: int,
+    path: Path,
 ) -> Path:
-    """Record the episode ``seed`` and draw ``names``' predictions at :data:`MOMENTS` moments to ``path``."""
-    from benchmarks.prediction import STEPS, make_predictors, record_episode
-    from risk_env.highway import make_intersection_env
-
-    env = make_intersection_env(duration=duration)
-    steps = record_episode(env, seed)
-    predictors = make_predictors(names, env, uncertainty)
-    last = max(len(steps) - 1 - STEPS, 0)
+    """Draw ``predictors``' predictions over ``horizon`` steps at :data:`MOMENTS` moments of the
+    recorded episode ``steps`` (:func:`benchmarks.prediction.record_episode` of seed ``seed``, on
+    ``network``) to ``path``."""
+    names = list(predictors)
+    last = max(len(steps) - 1 - horizon, 0)
     moments = sorted({int(round(x)) for x in np.linspace(min(2, last), last, MOMENTS)})
     fig, axes = plt.subplots(
         len(names), len(moments), figsize=(4.2 * len(moments), 4.4 * len(names)), squeeze=False
@@ -82,8 +85,8 @@ def draw(
             ax = axes[row, col]
             step = steps[t]
             kwargs = {"signals": step["signal"]} if name == "lane+signal" else {}
-            mixtures = predictors[name].predict_scene(step["m"], STEPS, **kwargs)
-            _road(ax, env.unwrapped.road.network)
+            mixtures = predictors[name].predict_scene(step["m"], horizon, **kwargs)
+            _road(ax, network)
             for k, vid in enumerate(step["ids"]):
                 if step["ego"][k]:
                     _vehicle(ax, step["m"][k], "tab:blue")
@@ -91,13 +94,13 @@ def draw(
                 color = COLORS[k % len(COLORS)]
                 _vehicle(ax, step["m"][k], "0.85")
                 future = [
-                    s["m"][s["ids"].index(vid), :2] for s in steps[t : t + STEPS + 1] if vid in s["ids"]
+                    s["m"][s["ids"].index(vid), :2] for s in steps[t : t + horizon + 1] if vid in s["ids"]
                 ]
                 future = np.array(future)
                 ax.plot(future[:, 0], future[:, 1], "k--", lw=0.8, zorder=5)
                 for mode in mixtures[k].above(threshold):
                     alpha = 0.1 + 0.5 * float(mode.weight)
-                    for n in SHOWN_STEPS:
+                    for n in (n for n in SHOWN_STEPS if n <= horizon):
                         ax.add_patch(
                             Polygon(_box(mode, n), closed=True, facecolor=color, alpha=alpha, lw=0, zorder=2)
                         )

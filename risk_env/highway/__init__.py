@@ -26,7 +26,7 @@ from risk_env.highway.adapter import (  # noqa: E402
     make_intersection_env,
 )
 from risk_env.highway.common import highway_scenario, policy_period, vehicle_measurement  # noqa: E402
-from risk_env.highway.lanes import LaneMode, LanePredictor  # noqa: E402
+from risk_env.highway.lanes.predictor import LaneMode, LanePredictor  # noqa: E402
 from risk_env.highway.route import RoutePath  # noqa: E402
 from risk_env.highway.wrapper import RiskCostWrapper  # noqa: E402
 

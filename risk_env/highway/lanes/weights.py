@@ -1,13 +1,13 @@
 """The lane predictor's route weights: a prior over the turns, updated by what is observed.
 
 For a road user measured at position p [m], direction of travel theta [rad], speed v [m/s] and
-turn rate omega [rad/s], each route r it can take (:func:`~risk_env.highway.lane_routes.routes_from`)
+turn rate omega [rad/s], each route r it can take (:func:`~risk_env.highway.lanes.routes.routes_from`)
 gets the weight
 
     w_r  proportional to  prior(turn of r) * L(offset_r) * L(heading_r) * L(turn rate_r)
 
 - ``offset_r``: p's lateral offset [m] from r's centreline (:meth:`Route.locate
-  <risk_env.highway.lane_routes.Route.locate>`);
+  <risk_env.highway.lanes.routes.Route.locate>`);
 - ``heading_r``: theta minus r's heading there [rad];
 - ``turn rate_r``: omega minus the turn rate highway-env's own lane keeping
   (``ControlledVehicle.steering_control``) gives a vehicle in this state that follows r
@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from risk_env.highway.lane_routes import Route, next_lanes, wrap
+from risk_env.highway.lanes.routes import Route, next_lanes, wrap
 
 TURNS = ("left", "straight", "right")
 """The turn kinds the prior weighs."""

@@ -4,21 +4,21 @@
 omega)`` to a :class:`~risk_env.prediction.mixture.Mixture` over n = 0..N, reading only the road
 network (never a vehicle's route, destination or target lane):
 
-- **Routes** (:mod:`~risk_env.highway.lane_routes`): the lane the road user is on (highway-env's
+- **Routes** (:mod:`~risk_env.highway.lanes.routes`): the lane the road user is on (highway-env's
   ``get_closest_lane_index`` with its heading, and the other lanes leaving the same node that it
   lies on: a vehicle entering a junction lies on all its turns), and every route through the graph
   from there, up to its first branch (``lookahead``) and as far as it can drive within the horizon.
 - **Modes**: routes that share every lane the road user can reach within the horizon (at full
   acceleration up to the speed limit) are one mode, so a vehicle far from a junction has one mode,
   one that can reach it has one per turn, and one inside a turn has one.
-- **Weights** (:mod:`~risk_env.highway.lane_weights`): a prior over the turns times the likelihood
+- **Weights** (:mod:`~risk_env.highway.lanes.weights`): a prior over the turns times the likelihood
   of the observed lateral offset, heading and turn rate against each route; a mode's weight is the
   sum of its routes' (:attr:`LaneMode.routes`).
-- **Means** (:mod:`~risk_env.highway.lane_speed`): each route moves along its centreline with
+- **Means** (:mod:`~risk_env.highway.lanes.speed`): each route moves along its centreline with
   highway-env's IDM behind the leader found as highway-env finds it and its intersection's
   yielding rule, every road user of the scene together (:meth:`LanePredictor.predict_scene`); the
   lateral offset decays to the centreline. A mode's mean is the weighted mean of its routes'.
-- **Spread** (:mod:`~risk_env.highway.lane_beliefs`), in the lane's frame (the belief's ``frame``:
+- **Spread** (:mod:`~risk_env.highway.lanes.beliefs`), in the lane's frame (the belief's ``frame``:
   the route's heading at the mode's mean, or at the middle of its reachable stretch):
   along the lane the truncation box reaches from full braking (``a_max``, to a stop) to full
   acceleration up to the speed limit, and at least to every route's own mean, plus ``margin_along``;
@@ -42,10 +42,11 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import SPEED_BOUND
-from risk_env.highway.lane_beliefs import Spread, mode_beliefs
-from risk_env.highway.lane_routes import Route, check_lane, lane_distance, next_lanes, routes_from, wrap
-from risk_env.highway.lane_speed import ON_LANE_MARGIN, Agents, SpeedModel, TrafficModel, reach
-from risk_env.highway.lane_weights import WeightModel, route_weights, turn_of
+from risk_env.highway.lanes.beliefs import Spread, mode_beliefs
+from risk_env.highway.lanes.routes import Route, check_lane, lane_distance, next_lanes, routes_from, wrap
+from risk_env.highway.lanes.speed import Agents, SpeedModel, TrafficModel, reach
+from risk_env.highway.lanes.table import ON_LANE_MARGIN
+from risk_env.highway.lanes.weights import WeightModel, route_weights, turn_of
 from risk_env.prediction.mixture import Mixture, Mode
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
 from risk_env.scenario.scenario import Scenario
@@ -65,7 +66,7 @@ class LaneMode(Mode):
 
     routes: tuple[tuple[str, float], ...] = ()
     """The routes this mode stands for, ``(label, weight)``, labels as :meth:`Route.label
-    <risk_env.highway.lane_routes.Route.label>`; their weights sum to the mode's."""
+    <risk_env.highway.lanes.routes.Route.label>`; their weights sum to the mode's."""
 
 
 @dataclass
@@ -85,11 +86,11 @@ class LanePredictor(Predictor):
         road_network: highway-env's ``RoadNetwork`` (``env.unwrapped.road.network``), read at each
             prediction (a new episode builds a new one with the same geometry).
         dt: the prediction step [s] (the env's step, :func:`risk_env.highway.policy_period`).
-        traffic: the speed model's numbers (:class:`~risk_env.highway.lane_speed.TrafficModel`).
-        weights: the route weights' numbers (:class:`~risk_env.highway.lane_weights.WeightModel`).
+        traffic: the speed model's numbers (:class:`~risk_env.highway.lanes.speed.TrafficModel`).
+        weights: the route weights' numbers (:class:`~risk_env.highway.lanes.weights.WeightModel`).
         lookahead: how far ahead [m] routes are followed to their first branch, whatever the horizon.
         off_road: farther than this [m] from every lane, a road user goes to ``fallback``.
-        spread: the beliefs' spread (:class:`~risk_env.highway.lane_beliefs.Spread`).
+        spread: the beliefs' spread (:class:`~risk_env.highway.lanes.beliefs.Spread`).
         fallback: the predictor of road users off the road (default: the paper's constant
             predictor at the ``low`` level with speeds up to 40 m/s, as
             :func:`risk_env.highway.highway_scenario`).
@@ -244,7 +245,7 @@ class LanePredictor(Predictor):
         return out
 
     def _following(self, index: tuple[str, str, int]) -> list[tuple[str, str, int]]:
-        """:func:`~risk_env.highway.lane_routes.next_lanes`, once per lane."""
+        """:func:`~risk_env.highway.lanes.routes.next_lanes`, once per lane."""
         if index not in self._next:
             self._next[index] = next_lanes(self.network, index)
         return self._next[index]

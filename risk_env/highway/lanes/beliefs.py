@@ -7,7 +7,7 @@ of that stretch's chord), whichever gives the smaller box:
 
 - **Along the lane** the truncation box reaches from full braking (``a_max``, down to a stop, or
   at the current speed if the road user rolls backwards) to full acceleration up to the speed limit
-  (:func:`~risk_env.highway.lane_speed.reach`), and at least to each of the mode's routes' own
+  (:func:`~risk_env.highway.lanes.speed.reach`), and at least to each of the mode's routes' own
   means, plus ``margin_along``. The box is the smallest one around the mean (in that frame) that
   holds the centreline between those two ends, so that on a curve it widens across the lane to
   hold the arc; across, it adds ``margin_across``.
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from risk_env.highway.lane_routes import Route
-from risk_env.highway.lane_speed import reach
+from risk_env.highway.lanes.routes import Route
+from risk_env.highway.lanes.speed import reach
 from risk_env.prediction.belief import Belief
 
 BOX_SPACING = 1.0
