@@ -1,8 +1,8 @@
 """How well each predictor predicts highway-env's traffic on seeded episodes of ``intersection-v2``.
 
     python -m benchmarks.prediction --episodes 10 --predictors constant,lane,lane+signal   # a quick look
-    python -m benchmarks.prediction --episodes 200 --predictors constant,lane,lane+signal \\
-        --out docs/results/prediction
+    python -m benchmarks.prediction --episodes 200 --seed 1000 --predictors constant,lane,lane+signal \\
+        --workers 1 --out docs/results/prediction
 
 Each episode (seeds S..S+E-1) runs ``intersection-v2``
 (:data:`~risk_env.highway.adapter.INTERSECTION_CONFIG`: T = 0.5 s) for ``--duration`` seconds with
