@@ -171,8 +171,10 @@ def targets(rows: list[dict[str, Any]]) -> list[str]:
 
 
 def markdown(rows: list[dict[str, Any]], args: argparse.Namespace, command: str, wall: float) -> str:
-    """The targets, then the table of ``rows`` at 1.5 s and 3 s, with the settings and the command."""
+    """The command and the settings, the targets (section ``targets`` for the docs' snippets), then
+    the table of ``rows`` at 1.5 s and 3 s (section ``table``)."""
     lines = [
+        "<!-- --8<-- [start:targets] -->",
         f"`{command}`",
         "",
         f"intersection-v2 (INTERSECTION_CONFIG, T = 0.5 s),"
@@ -182,7 +184,9 @@ def markdown(rows: list[dict[str, Any]], args: argparse.Namespace, command: str,
         f" Wall time {wall:.0f} s.",
         "",
         *targets(rows),
+        "<!-- --8<-- [end:targets] -->",
         "",
+        "<!-- --8<-- [start:table] -->",
         "| predictor | phase | horizon [s] | ADE [m] | coverage | box area [m²] | area 99 % [m²] |"
         " route Brier | samples | fallbacks |",
         "| " + " | ".join(["---"] * 10) + " |",
@@ -195,6 +199,7 @@ def markdown(rows: list[dict[str, Any]], args: argparse.Namespace, command: str,
             f" {100 * r['coverage']:.1f}% | {r['box_area_m2']:.0f} | {r['area_99_m2']:.0f} |"
             f" {_cell(r['route_brier'], 3)} | {r['samples']} | {r['fallbacks']} |"
         )
+    lines.append("<!-- --8<-- [end:table] -->")
     return "\n".join(lines) + "\n"
 
 
