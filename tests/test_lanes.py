@@ -159,6 +159,30 @@ def test_the_means_lie_on_the_centrelines_and_the_spread_in_the_lane(network, pr
         assert np.all(np.diff(b.half_x) > 0) and b.half_x[-1] > 10  # braking to accelerating
 
 
+def test_draws_of_a_lane_belief_fall_in_its_box_as_the_benchmark_tests_it(network, predictor):
+    mixture = predictor.predict(alone(network, ("ir0", "il1", 0), 3.0, 6.0, destination="o1"), STEPS)
+    rng = np.random.default_rng(2)
+    for mode in mixture:
+        belief = mode.beliefs[STEPS]
+        assert belief.frame != 0.0
+        draws = belief.sample(rng, 400)
+        assert all(samples._inside(mode, STEPS, point)[0] for point in draws[:, :2])
+        assert np.all((draws[:, 2] >= belief.v_lo) & (draws[:, 2] <= belief.v_hi))
+
+
+def test_a_box_on_a_curve_holds_the_arc_the_vehicle_can_reach(network, predictor):
+    m = alone(network, ("ir0", "il1", 0), 2.0, 5.0, destination="o1")  # a right turn, radius 9 m
+    (mode,) = [mode for mode in predictor.predict(m, STEPS) if mode.label.startswith("ir0>il1")]
+    route = Route(network, (("ir0", "il1", 0), ("il1", "o1", 0)))
+    start = route.locate(m[:2])[0]
+    low, high = reach(5.0, 10.0, STEPS, T, 6.0)
+    for n in range(1, STEPS + 1):
+        arc = route.position(np.linspace(start + low[n], start + high[n], 50))
+        assert all(samples._inside(mode, n, point)[0] for point in arc)
+    b = mode.beliefs  # round a quarter circle: well under the square on the stretch's length
+    assert 4 * b.half_x[-1] * b.half_y[-1] < 0.6 * (high[-1] - low[-1] + 1) ** 2
+
+
 def test_the_box_along_the_lane_reaches_from_full_braking_to_full_acceleration():
     straight = RoadNetwork.straight_road_network(lanes=1, length=1000.0, speed_limit=10.0)
     spread = Spread(margin_along=0.0)
