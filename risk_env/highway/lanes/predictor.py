@@ -4,10 +4,11 @@
 omega)`` to a :class:`~risk_env.prediction.mixture.Mixture` over n = 0..N, reading only the road
 network (never a vehicle's route, destination or target lane):
 
-- **Routes** (:mod:`~risk_env.highway.lanes.routes`): the lane the road user is on (highway-env's
-  ``get_closest_lane_index`` with its heading, and the other lanes leaving the same node that it
-  lies on: a vehicle entering a junction lies on all its turns), and every route through the graph
-  from there, up to its first branch (``lookahead``) and as far as it can drive within the horizon.
+- **Routes** (:mod:`~risk_env.highway.lanes.routes`): the lanes the road user is on (the one
+  highway-env's ``get_closest_lane_index`` gives for its position and direction of travel, and
+  every lane that holds it within its length and width in a heading less than 90 degrees off: a
+  vehicle entering a junction lies on all its turns), and every route through the graph from
+  there, up to its first branch (``lookahead``) and as far as it can drive within the horizon.
 - **Modes**: routes that share every lane the road user can reach within the horizon (at full
   acceleration up to the speed limit) are one mode, so a vehicle far from a junction has one mode,
   one that can reach it has one per turn, and one inside a turn has one.
@@ -150,8 +151,9 @@ class LanePredictor(Predictor):
     # ------------------------------------------------------------------ interface
     def predict(self, measurement: Any, steps: int, lane: Any = None, signal: Any = None) -> Mixture:
         """The mixture of one road user alone (no leader, nobody to yield to); ``lane``: its lane
-        index if known (checked against the map), ``signal``: its turn signal (a unit vector toward
-        its destination, highway-env's ``observe_intentions``) if observed."""
+        index if known (checked against the map; it then stands for the closest lane, and the road
+        user counts as on the road), ``signal``: its turn signal (a unit vector toward its
+        destination, highway-env's ``observe_intentions``) if observed."""
         m = np.asarray(checks.finite_reals("measurement", measurement, 5), dtype=float)
         return self.predict_scene(
             m[None],
