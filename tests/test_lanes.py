@@ -131,6 +131,15 @@ def test_a_vehicle_that_has_begun_its_turn_is_predicted_turning(network, predict
     assert weight_of(predictor.predict(m, STEPS), node) > 0.95
 
 
+@pytest.mark.parametrize(("s", "speed"), [(1.0, -10.0), (0.5, -14.0), (99.0, 10.0), (50.0, 0.0)])
+def test_a_vehicle_rolling_backwards_or_at_a_lane_end_gets_its_lane(network, predictor, s, speed):
+    lane = network.get_lane(("il1", "o1", 0))
+    x, y = lane.position(s, 0.0)
+    mixture = predictor.predict([x, y, lane.heading_at(s), speed, 0.0], STEPS)
+    assert [m.label for m in mixture] == ["il1>o1"] and mixture.modes[0].weight == 1.0
+    assert mixture.modes[0].beliefs.speed[-1] <= max(speed, 0.0) + 6 * 3
+
+
 def test_far_from_a_junction_one_mode_near_it_one_per_turn(network, predictor):
     far = predictor.predict(alone(network, ("o0", "ir0", 0), 20.0, 8.0), STEPS)
     assert [m.label for m in far] == ["o0>ir0"] and far.modes[0].weight == 1.0

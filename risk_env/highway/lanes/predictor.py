@@ -278,11 +278,9 @@ class LanePredictor(Predictor):
         weights = route_weights(self.weights, chosen, turns, row, signal)
         groups: dict[tuple, list[int]] = {}
         for k, (route, s0) in enumerate(zip(chosen, located[:, 0], strict=True)):
-            reached = tuple(
-                index
-                for index, start in zip(route.lanes, route.offsets, strict=True)
-                if start <= s0 + furthest
-            )
+            # the lanes it can reach: up to the one at full acceleration (at least the one it is on,
+            # also when it rolls backwards)
+            reached = route.lanes[: int(route.lane_of(s0 + max(furthest, 0.0))) + 1]
             groups.setdefault(reached, []).append(k)
         labels = [">".join([key[0][0], *(index[1] for index in key)]) for key in groups]
         return _Hypotheses(chosen, located[:, 0], located[:, 1], weights, list(groups.values()), labels)
