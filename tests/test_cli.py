@@ -153,6 +153,7 @@ SMALLEST = {
     "exact_accuracy": {"--beliefs": "20"},
     "highway_intersection": {"--episodes": "1", "--workers": "1"},
     "highway_render": {"--max-steps": "2"},
+    "prediction": {"--episodes": "1", "--duration": "1", "--workers": "1"},
     "train_ppo": {
         "--total-timesteps": "64",
         "--num-envs": "3",

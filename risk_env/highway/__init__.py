@@ -7,7 +7,9 @@
   any highway-env environment, from :func:`risk_env.predict` and :mod:`risk_env.risk.estimators`;
 - :class:`IntersectionAdapter`: our MPC agents drive highway-env's controlled vehicle on
   ``intersection-v1`` with continuous actions; :class:`IDMEgo` is highway-env's own IDM driver for
-  comparison.
+  comparison;
+- :class:`LanePredictor`: a prediction that follows highway-env's lanes (one mode per route, the
+  speed from highway-env's own traffic rules), :mod:`risk_env.highway.lanes`.
 
 highway-env is optional (``pip install 'riskcrossing[render]'``); ``import risk_env`` never needs
 it, this subpackage does.
@@ -24,6 +26,7 @@ from risk_env.highway.adapter import (  # noqa: E402
     make_intersection_env,
 )
 from risk_env.highway.common import highway_scenario, policy_period, vehicle_measurement  # noqa: E402
+from risk_env.highway.lanes.predictor import LaneMode, LanePredictor  # noqa: E402
 from risk_env.highway.route import RoutePath  # noqa: E402
 from risk_env.highway.wrapper import RiskCostWrapper  # noqa: E402
 
@@ -31,6 +34,8 @@ __all__ = [
     "INTERSECTION_CONFIG",
     "IDMEgo",
     "IntersectionAdapter",
+    "LaneMode",
+    "LanePredictor",
     "RiskCostWrapper",
     "RoutePath",
     "highway_scenario",

@@ -4,8 +4,8 @@ the horizon, a :class:`~risk_env.prediction.mixture.Mixture` of modes.
 - :class:`ConstantPredictor` (``"constant"``): the paper's, one mode: the unicycle with the
   measured, constant inputs and the scenario's uncertainty growing on the world's axes
   (:func:`risk_env.prediction.belief.predict`);
-- ``"lane"``: highway-env's lanes and routes (:class:`risk_env.highway.lanes.LanePredictor`; it
-  needs a road network, so it is built by the highway adapter, not by name alone).
+- ``"lane"``: highway-env's lanes and routes (:class:`risk_env.highway.lanes.predictor.LanePredictor`;
+  it needs a road network, so it is built from highway-env's env, not by name alone).
 
 Everything that predicts takes a :class:`Predictor`: the env (its objects' one-step beliefs), the
 agents (their plans) and the benchmarks (``python -m benchmarks.prediction``).
@@ -78,7 +78,7 @@ class ConstantPredictor(Predictor):
 def make_predictor(predictor: str | Predictor | None, scenario: Scenario) -> Predictor:
     """A predictor from a name of :data:`PREDICTOR_NAMES` or an instance (returned as is);
     None: the paper's. ``"lane"`` needs highway-env's road network: build
-    :class:`risk_env.highway.lanes.LanePredictor` (the highway adapter does)."""
+    :class:`risk_env.highway.lanes.predictor.LanePredictor` from the env and pass it."""
     if predictor is None:
         return ConstantPredictor(scenario)
     if isinstance(predictor, Predictor):
@@ -86,8 +86,8 @@ def make_predictor(predictor: str | Predictor | None, scenario: Scenario) -> Pre
     name = checks.text("predictor", predictor, PREDICTOR_NAMES)
     if name == "lane":
         raise ValueError(
-            "predictor='lane' follows highway-env's lanes and needs its road network: use"
-            " risk_env.highway.IntersectionAdapter(..., predictor='lane') or build"
-            " risk_env.highway.lanes.LanePredictor(road_network, dt) yourself"
+            "predictor='lane' follows highway-env's lanes and needs its road network: build"
+            " risk_env.highway.LanePredictor(env.unwrapped.road.network, risk_env.highway.policy_period(env))"
+            " and pass that instance"
         )
     return ConstantPredictor(scenario)

@@ -1,0 +1,140 @@
+"""The lane predictor's beliefs: truncated Gaussians in the lane's frame around each mode's mean.
+
+A mode's belief at step n (:func:`mode_beliefs`) lies in a frame of its route's heading
+(:attr:`Belief.frame <risk_env.prediction.belief.Belief.frame>`): the heading at the mean, or at
+the middle of the stretch of the route the road user can reach (on a circular lane, the direction
+of that stretch's chord), whichever gives the smaller box:
+
+- **Along the lane** the truncation box reaches from full braking (``a_max``, down to a stop, or
+  at the current speed if the road user rolls backwards) to full acceleration up to the speed limit
+  (:func:`~risk_env.highway.lanes.speed.reach`), and at least to each of the mode's routes' own
+  means, plus ``margin_along``. The box is the smallest one around the mean (in that frame) that
+  holds the centreline between those two ends, so that on a curve it widens across the lane to
+  hold the arc; across, it adds ``margin_across``.
+- The standard deviation along the lane is ``sqrt(sigma_along0^2 + (sigma_speed t)^2 +
+  (sigma_accel t^2 / 2)^2)`` (at most the box's half length), across it ``sigma_across`` (at most
+  the box's half width and half the lane's width); the speed's is ``sigma_speed + sigma_accel t``,
+  truncated to the speeds of full braking and full acceleration (and every route's mean speed).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from risk_env.highway.lanes.routes import Route
+from risk_env.highway.lanes.speed import reach
+from risk_env.prediction.belief import Belief
+
+BOX_SPACING = 1.0
+"""Largest spacing [m] of the centreline points that a truncation box must hold."""
+
+
+@dataclass(frozen=True)
+class Spread:
+    """The numbers of the beliefs' spread (see the module docstring)."""
+
+    margin_along: float = 0.5
+    """Added to the truncation box along the lane, on each side [m]."""
+    margin_across: float = 0.5
+    """Added to the truncation box across the lane, on each side [m]."""
+    sigma_along0: float = 0.2
+    """Standard deviation along the lane at n = 0 [m]."""
+    sigma_speed: float = 0.5
+    """Standard deviation of the speed [m/s] (its growth along the lane: ``sigma_speed t``)."""
+    sigma_accel: float = 1.5
+    """Standard deviation of the acceleration [m/s^2] (along: ``sigma_accel t^2 / 2``)."""
+    sigma_across: float = 0.2
+    """Standard deviation across the lane [m]."""
+
+    def __post_init__(self) -> None:
+        for name in (
+            "margin_along",
+            "margin_across",
+            "sigma_along0",
+            "sigma_speed",
+            "sigma_accel",
+            "sigma_across",
+        ):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"Spread.{name} must be a finite number >= 0, got {value!r}")
+
+
+def mode_beliefs(
+    spread: Spread,
+    route: Route,
+    s: np.ndarray,
+    v: np.ndarray,
+    share: np.ndarray,
+    start: float,
+    offset: float,
+    speed: float,
+    dt: float,
+    a_max: float,
+    lateral_time: float,
+) -> Belief:
+    """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
+
+    ``route``: the geometry (the mode's most likely route); ``s``, ``v``: ``(R, N+1)`` arc lengths
+    [m] and speeds [m/s] of the mode's routes (same arc length along their shared lanes), ``share``:
+    their weights within the mode ``(R,)``; ``start``, ``offset``: the road user's arc length and
+    lateral offset [m] now, ``speed`` its speed [m/s]; ``dt`` [s]; ``a_max`` [m/s^2] of full
+    braking and acceleration; ``lateral_time`` [s] with which the offset decays."""
+    steps = s.shape[1] - 1
+    t = np.arange(steps + 1) * dt
+    s_mean, v_mean = share @ s, share @ v
+    limit = float(route.speed_limit(start))
+    limit = max(speed, 0.0) + a_max * t[-1] if not math.isfinite(limit) else limit
+    low, high = reach(speed, limit, steps, dt, a_max)
+    s_lo = np.minimum(s.min(axis=0), start + low) - spread.margin_along
+    s_hi = np.maximum(s.max(axis=0), start + high) + spread.margin_along
+    lateral = offset * np.exp(-t / lateral_time)
+    mean = route.position(s_mean, lateral)
+    count = max(int(math.ceil(float((s_hi - s_lo).max()) / BOX_SPACING)), 1) + 1
+    grid = s_lo[:, None] + (s_hi - s_lo)[:, None] * np.linspace(0.0, 1.0, count)[None, :]
+    points = route.position(grid, np.broadcast_to(lateral[:, None], grid.shape)) - mean[:, None, :]
+    candidates = np.stack([route.heading(s_mean), route.heading((s_lo + s_hi) / 2)])  # (2, N+1)
+    c, si = np.cos(candidates)[..., None], np.sin(candidates)[..., None]
+    half_x = np.abs(c * points[None, ..., 0] + si * points[None, ..., 1]).max(axis=-1)
+    half_y = np.abs(c * points[None, ..., 1] - si * points[None, ..., 0]).max(axis=-1) + spread.margin_across
+    best = np.argmin(half_x * half_y, axis=0)  # (N+1,): the smaller box
+    columns = np.arange(steps + 1)
+    frame, half_x, half_y = candidates[best, columns], half_x[best, columns], half_y[best, columns]
+    width = np.array([float(route.objects[int(k)].width_at(0.0)) for k in route.lane_of(s_mean)])
+    growth = np.sqrt(
+        spread.sigma_along0**2 + (spread.sigma_speed * t) ** 2 + (spread.sigma_accel * t**2 / 2) ** 2
+    )
+    sigma_x = np.minimum(growth, half_x)
+    sigma_y = np.minimum(np.minimum(spread.sigma_across, half_y), width / 2)
+    v_lo = np.minimum(v.min(axis=0), np.maximum(speed - a_max * t, min(speed, 0.0)))
+    v_hi = np.maximum(v.max(axis=0), np.minimum(speed + a_max * t, max(limit, speed)))
+    sigma_v = spread.sigma_speed + spread.sigma_accel * t
+    heading = route.heading(s_mean)
+    return lane_belief(
+        mean[:, 0], mean[:, 1], heading, v_mean, sigma_x, sigma_y, sigma_v, half_x, half_y, v_lo, v_hi, frame
+    )
+
+
+def lane_belief(
+    x: Any,
+    y: Any,
+    heading: Any,
+    speed: Any,
+    sigma_along: Any,
+    sigma_across: Any,
+    sigma_v: Any,
+    half_along: Any,
+    half_across: Any,
+    v_lo: Any,
+    v_hi: Any,
+    frame: Any,
+) -> Belief:
+    """A :class:`~risk_env.prediction.belief.Belief` with mean heading ``heading`` [rad] in the
+    frame turned by ``frame`` [rad] from the world's axes: ``sigma_along``/``half_along`` along
+    that frame's first axis (the lane), ``sigma_across``/``half_across`` across it."""
+    spread = (sigma_along, sigma_across, sigma_v, half_along, half_across, v_lo, v_hi)
+    return Belief(x, y, heading, speed, *spread, frame=frame)

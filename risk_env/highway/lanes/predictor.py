@@ -1,0 +1,336 @@
+"""A predictor that knows highway-env's road: one mode per route, moving along the lanes.
+
+:class:`LanePredictor` (``name = "lane"``) maps a road user's measurement ``(x, y, theta, v,
+omega)`` to a :class:`~risk_env.prediction.mixture.Mixture` over n = 0..N, reading only the road
+network (never a vehicle's route, destination or target lane):
+
+- **Routes** (:mod:`~risk_env.highway.lanes.routes`): the lanes the road user is on (the one
+  highway-env's ``get_closest_lane_index`` gives for its position and direction of travel, and
+  every lane that holds it within its length and width in a heading less than 90 degrees off: a
+  vehicle entering a junction lies on all its turns), and every route through the graph from
+  there, up to its first branch (``lookahead``) and as far as it can drive within the horizon.
+- **Modes**: routes that share every lane the road user can reach within the horizon (at full
+  acceleration up to the speed limit) are one mode, so a vehicle far from a junction has one mode,
+  one that can reach it has one per turn, and one inside a turn has one.
+- **Weights** (:mod:`~risk_env.highway.lanes.weights`): a prior over the turns times the likelihood
+  of the observed lateral offset, heading and turn rate against each route; a mode's weight is the
+  sum of its routes' (:attr:`LaneMode.routes`).
+- **Means** (:mod:`~risk_env.highway.lanes.speed`): each route moves along its centreline with
+  highway-env's IDM behind the leader found as highway-env finds it and its intersection's
+  yielding rule, every road user of the scene together (:meth:`LanePredictor.predict_scene`); the
+  lateral offset decays to the centreline. A mode's mean is the weighted mean of its routes'.
+- **Spread** (:mod:`~risk_env.highway.lanes.beliefs`), in the lane's frame (the belief's ``frame``:
+  the route's heading at the mode's mean, or at the middle of its reachable stretch):
+  along the lane the truncation box reaches from full braking (``a_max``, to a stop) to full
+  acceleration up to the speed limit, and at least to every route's own mean, plus ``margin_along``;
+  it is the box around the mean that holds the centreline between those two ends (on a curve it
+  widens across the lane to hold the arc) plus ``margin_across``. The standard deviation along is
+  ``sqrt(sigma_along0^2 + (sigma_speed t)^2 + (sigma_accel t^2 / 2)^2)`` (at most the box), across
+  ``sigma_across`` (at most the box, and at most half the lane's width); the speed's is
+  ``sigma_speed + sigma_accel t`` within the speeds of full braking and full acceleration.
+- **Off the road**: a road user farther than ``off_road`` [m] from every lane (beside it, or
+  before its start or beyond its end) is predicted by ``fallback`` (the paper's constant predictor,
+  one mode) and counted in :attr:`LanePredictor.fallbacks`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from risk_env import checks
+from risk_env.highway.common import SPEED_BOUND
+from risk_env.highway.lanes.beliefs import Spread, mode_beliefs
+from risk_env.highway.lanes.routes import Route, check_lane, lane_distance, next_lanes, routes_from, wrap
+from risk_env.highway.lanes.speed import Agents, SpeedModel, TrafficModel, reach
+from risk_env.highway.lanes.table import ON_LANE_MARGIN
+from risk_env.highway.lanes.weights import WeightModel, route_weights, turn_of
+from risk_env.prediction.mixture import Mixture, Mode
+from risk_env.prediction.predictors import ConstantPredictor, Predictor
+from risk_env.scenario.scenario import Scenario
+
+ORDER = ("straight", "left", "right")
+"""The order of a road user's modes by turn: of equally likely modes the first is the most likely
+one (:meth:`Mixture.most_likely <risk_env.prediction.mixture.Mixture.most_likely>`), and straight on
+lies between the turns."""
+
+
+@dataclass(frozen=True)
+class LaneMode(Mode):
+    """A :class:`~risk_env.prediction.mixture.Mode` of the lane predictor, with the routes it stands
+    for; its beliefs lie in the lane's frame (:attr:`Belief.frame
+    <risk_env.prediction.belief.Belief.frame>`: ``sigma_x``/``half_x`` along the lane,
+    ``sigma_y``/``half_y`` across it)."""
+
+    routes: tuple[tuple[str, float], ...] = ()
+    """The routes this mode stands for, ``(label, weight)``, labels as :meth:`Route.label
+    <risk_env.highway.lanes.routes.Route.label>`; their weights sum to the mode's."""
+
+
+@dataclass
+class _Hypotheses:
+    routes: list[Route]
+    starts: np.ndarray
+    offsets: np.ndarray
+    weights: np.ndarray
+    groups: list[list[int]]
+    labels: list[str]
+
+
+class LanePredictor(Predictor):
+    """Routes along highway-env's lanes as modes (see the module docstring).
+
+    Args:
+        road_network: highway-env's ``RoadNetwork`` (``env.unwrapped.road.network``), read at each
+            prediction (a new episode builds a new one with the same geometry).
+        dt: the prediction step [s] (the env's step, :func:`risk_env.highway.policy_period`).
+        traffic: the speed model's numbers (:class:`~risk_env.highway.lanes.speed.TrafficModel`).
+        weights: the route weights' numbers (:class:`~risk_env.highway.lanes.weights.WeightModel`).
+        lookahead: how far ahead [m] routes are followed to their first branch, whatever the horizon.
+        off_road: farther than this [m] from every lane, a road user goes to ``fallback``.
+        spread: the beliefs' spread (:class:`~risk_env.highway.lanes.beliefs.Spread`).
+        fallback: the predictor of road users off the road (default: the paper's constant
+            predictor at the ``low`` level with speeds up to 40 m/s, as
+            :func:`risk_env.highway.highway_scenario`).
+    """
+
+    name = "lane"
+
+    def __init__(
+        self,
+        road_network: Any,
+        dt: float,
+        traffic: TrafficModel | None = None,
+        weights: WeightModel | None = None,
+        spread: Spread | None = None,
+        lookahead: float = 150.0,
+        off_road: float = 2.0,
+        fallback: Predictor | None = None,
+    ) -> None:
+        if not (hasattr(road_network, "graph") and hasattr(road_network, "get_closest_lane_index")):
+            raise TypeError(
+                f"road_network must be highway-env's RoadNetwork, got {checks.describe(road_network)}"
+            )
+        if not road_network.lanes_list():
+            raise ValueError("road_network has no lanes")
+        self.network = road_network
+        self.dt = checks.positive("dt", dt)
+        self.traffic = TrafficModel() if traffic is None else traffic
+        self.weights = WeightModel() if weights is None else weights
+        self.spread = Spread() if spread is None else spread
+        for name, value, kind in (
+            ("traffic", self.traffic, TrafficModel),
+            ("weights", self.weights, WeightModel),
+            ("spread", self.spread, Spread),
+        ):
+            if not isinstance(value, kind):
+                raise TypeError(f"{name} must be a {kind.__name__} or None, got {checks.describe(value)}")
+        self.lookahead = checks.positive("lookahead", lookahead)
+        self.off_road = checks.positive("off_road", off_road)
+        if fallback is None:
+            scenario = Scenario.preset("low", dt=self.dt, velocity_bounds0=(-SPEED_BOUND, SPEED_BOUND))
+            fallback = ConstantPredictor(scenario)
+        if not isinstance(fallback, Predictor):
+            raise TypeError(f"fallback must be a Predictor, got {checks.describe(fallback)}")
+        self.fallback = fallback
+        self.speed_model = SpeedModel(road_network, self.traffic)
+        self._routes: dict[tuple, Route] = {}
+        self._turns: dict[tuple, str] = {}
+        self._next: dict[tuple, list] = {}
+        self.fallbacks = 0
+        """How many road users were off the road and went to ``fallback``, since construction."""
+        self.predicted = 0
+        """How many road users were predicted, since construction."""
+
+    def __repr__(self) -> str:
+        return f"LanePredictor(dt={self.dt}, traffic={self.traffic}, weights={self.weights})"
+
+    # ------------------------------------------------------------------ interface
+    def predict(self, measurement: Any, steps: int, lane: Any = None, signal: Any = None) -> Mixture:
+        """The mixture of one road user alone (no leader, nobody to yield to); ``lane``: its lane
+        index if known (checked against the map; it then stands for the closest lane, and the road
+        user counts as on the road), ``signal``: its turn signal (a unit vector toward its
+        destination, highway-env's ``observe_intentions``) if observed."""
+        m = np.asarray(checks.finite_reals("measurement", measurement, 5), dtype=float)
+        return self.predict_scene(
+            m[None],
+            steps,
+            lanes=None if lane is None else [lane],
+            signals=None if signal is None else [signal],
+        )[0]
+
+    def predict_scene(
+        self, measurements: Any, steps: int, lanes: Any = None, signals: Any = None
+    ) -> list[Mixture]:
+        """One mixture per road user of ``measurements (m, 5)``, all moved together (leaders,
+        yielding). ``lanes``: None, or one lane index (or None) per road user; ``signals``: None, or
+        one turn signal ``(2,)`` (or None) per road user."""
+        rows = np.asarray(measurements, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != 5 or not np.all(np.isfinite(rows)):
+            raise ValueError(
+                f"measurements must be finite, of shape (m, 5), got {checks.describe(measurements)}"
+            )
+        steps = checks.integer("steps", steps, minimum=0)
+        lanes = self._per_user("lanes", lanes, len(rows))
+        signals = self._per_user("signals", signals, len(rows))
+        lanes = [None if lane is None else check_lane(self.network, lane) for lane in lanes]
+        along, across = self.speed_model.table.locate(rows[:, :2])
+        hypotheses = [
+            self._hypotheses(
+                row, steps, lane, None if signal is None else self._signal(signal), along[:, i], across[:, i]
+            )
+            for i, (row, lane, signal) in enumerate(zip(rows, lanes, signals, strict=True))
+        ]
+        agents = self._agents(rows, hypotheses)
+        s, v = self.speed_model.run(agents, steps, self.dt) if len(agents.vehicle) else (None, None)
+        out: list[Mixture] = []
+        first = 0
+        self.predicted += len(rows)
+        for row, hyp in zip(rows, hypotheses, strict=True):
+            if hyp is None:
+                self.fallbacks += 1
+                out.append(self.fallback.predict(row, steps))
+                continue
+            count = len(hyp.routes)
+            out.append(self._mixture(row, hyp, s[first : first + count], v[first : first + count]))
+            first += count
+        return out
+
+    # ------------------------------------------------------------------ hypotheses
+    @staticmethod
+    def _per_user(name: str, values: Any, count: int) -> list[Any]:
+        if values is None:
+            return [None] * count
+        values = list(values)
+        if len(values) != count:
+            raise ValueError(f"{name} must have one entry per road user ({count}), got {len(values)}")
+        return values
+
+    @staticmethod
+    def _signal(signal: Any) -> np.ndarray | None:
+        vector = np.asarray(signal, dtype=float).reshape(-1)
+        if vector.shape != (2,):
+            raise ValueError(f"a turn signal must be a vector (2,), got {checks.describe(signal)}")
+        norm = float(np.hypot(*vector))
+        return None if not np.isfinite(norm) or norm < 1e-9 else vector / norm
+
+    def _route(self, lanes: tuple) -> Route:
+        """The route through ``lanes`` (built once per predictor), its turn noted in ``_turns``."""
+        route = self._routes.get(lanes)
+        if route is None:
+            route = self._routes[lanes] = Route(self.network, lanes)
+            self._turns[lanes] = turn_of(route)
+        return route
+
+    def _start_lanes(
+        self, point: np.ndarray, theta: float, lane: Any, s: np.ndarray, r: np.ndarray
+    ) -> list[tuple[str, str, int]]:
+        """The lanes the road user is on: the closest (or ``lane``) and every lane that holds
+        ``point`` within its length and width in a heading less than 90 degrees from ``theta``
+        (``s``, ``r``: its coordinates on every lane of :attr:`table`); [] when it is off the road."""
+        table = self.speed_model.table
+        if lane is None:
+            closest = table.indices[int(table.closest(s[:, None], r[:, None], np.array([theta]))[0])]
+        else:
+            closest = lane
+        if lane is None and lane_distance(self.network.get_lane(closest), point) > self.off_road:
+            return []
+        out = [closest]
+        half = table.half_width - ON_LANE_MARGIN
+        for i in np.flatnonzero((s >= 0) & (s <= table.length) & (np.abs(r) <= half)):
+            index = table.indices[i]
+            if index != closest and abs(float(wrap(theta - table.objects[i].heading_at(s[i])))) < math.pi / 2:
+                out.append(index)
+        return out
+
+    def _following(self, index: tuple[str, str, int]) -> list[tuple[str, str, int]]:
+        """:func:`~risk_env.highway.lanes.routes.next_lanes`, once per lane."""
+        if index not in self._next:
+            self._next[index] = next_lanes(self.network, index)
+        return self._next[index]
+
+    def _hypotheses(
+        self, row: np.ndarray, steps: int, lane: Any, signal: np.ndarray | None, s: np.ndarray, r: np.ndarray
+    ) -> _Hypotheses | None:
+        point, theta, v = row[:2], float(row[2]), float(row[3])
+        starts = self._start_lanes(point, theta, lane, s, r)
+        if not starts:
+            return None
+        limit = self.network.get_lane(starts[0]).speed_limit
+        limit = SPEED_BOUND if limit is None else float(limit)
+        furthest = float(reach(v, limit, steps, self.dt, self.traffic.max_acceleration)[1][-1])
+        routes: dict[tuple, Route] = {}
+        for index in starts:
+            s0, _ = self.network.get_lane(index).local_coordinates(point)
+            for lanes in routes_from(
+                self.network, index, float(s0), furthest, self.lookahead, self._following
+            ):
+                route = self._route(lanes)
+                here = int(route.lane_of(route.locate(point)[0]))  # from the lane it is on now
+                route = self._route(lanes[here:])
+                routes.setdefault(route.lanes, route)
+        chosen = sorted(routes.values(), key=lambda route: ORDER.index(self._turns[route.lanes]))
+        located = np.array([route.locate(point) for route in chosen])
+        turns = [self._turns[route.lanes] for route in chosen]
+        weights = route_weights(self.weights, chosen, turns, row, signal)
+        groups: dict[tuple, list[int]] = {}
+        for k, (route, s0) in enumerate(zip(chosen, located[:, 0], strict=True)):
+            # the lanes it can reach: up to the one at full acceleration (at least the one it is on,
+            # also when it rolls backwards)
+            reached = route.lanes[: int(route.lane_of(s0 + max(furthest, 0.0))) + 1]
+            groups.setdefault(reached, []).append(k)
+        labels = [">".join([key[0][0], *(index[1] for index in key)]) for key in groups]
+        return _Hypotheses(chosen, located[:, 0], located[:, 1], weights, list(groups.values()), labels)
+
+    @staticmethod
+    def _agents(rows: np.ndarray, hypotheses: list[_Hypotheses | None]) -> Agents:
+        vehicle, routes, s, r, v, rep = [], [], [], [], [], []
+        for i, (row, hyp) in enumerate(zip(rows, hypotheses, strict=True)):
+            if hyp is None:
+                continue
+            best = int(np.argmax(hyp.weights))
+            for k, route in enumerate(hyp.routes):
+                vehicle.append(i)
+                routes.append(route)
+                s.append(hyp.starts[k])
+                r.append(hyp.offsets[k])
+                v.append(row[3])
+                rep.append(k == best)
+        return Agents(
+            np.array(vehicle, dtype=int),
+            routes,
+            np.array(s, float),
+            np.array(r, float),
+            np.array(v, float),
+            np.array(rep, dtype=bool),
+        )
+
+    # ------------------------------------------------------------------ beliefs
+    def _mixture(self, row: np.ndarray, hyp: _Hypotheses, s: np.ndarray, v: np.ndarray) -> Mixture:
+        """The road user's modes from its routes' arc lengths and speeds ``(R, N+1)``."""
+        modes = []
+        for group, label in zip(hyp.groups, hyp.labels, strict=True):
+            w = hyp.weights[group]
+            total = float(w.sum())
+            lead = group[int(np.argmax(w))]
+            share = w / total if total > 0 else np.full(len(group), 1.0 / len(group))
+            beliefs = mode_beliefs(
+                self.spread,
+                hyp.routes[lead],
+                s[group],
+                v[group],
+                share,
+                float(hyp.starts[lead]),
+                float(hyp.offsets[lead]),
+                float(row[3]),
+                self.dt,
+                self.traffic.max_acceleration,
+                self.traffic.lateral_time,
+            )
+            routes = tuple((hyp.routes[k].label(), float(hyp.weights[k])) for k in group)
+            modes.append((total, beliefs, label, routes))
+        norm = sum(m[0] for m in modes)
+        return Mixture(tuple(LaneMode(w / norm, b, label, routes=r) for w, b, label, r in modes))
