@@ -19,7 +19,7 @@ from agents.mpc import measure
 from agents.mpc.measure import FREE_MARGIN
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, soft_variant
-from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
+from agents.mpc.nlp.parameters import parameter_vector
 from agents.mpc.nlp.solver import (
     DEFAULT_JIT_CACHE,
     SOLVERS,
@@ -29,10 +29,11 @@ from agents.mpc.nlp.solver import (
     cached_problem,
     call_solver,
 )
-from agents.mpc.objects import check_slots, combine, slot_scenario
+from agents.mpc.objects import MODE_THRESHOLD, Slots, check_slots, check_threshold, combine
 from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step, StepContext, StepInput
 from risk_env import observation as ob
 from risk_env.prediction.belief import Belief
+from risk_env.prediction.predictors import Predictor, make_predictor
 from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk
 from risk_env.scenario.scenario import Scenario
 
@@ -102,6 +103,9 @@ class PathFollowingMPC:
 
     risk_method: str = ""
     RISK_METHODS: ClassVar[tuple[str, ...]] = ()
+    WEIGHTED: ClassVar[bool] = False
+    """Whether the risk is an expectation, summed over a mixture's modes with their weights (the
+    SMPC); else every mode of weight at least ``mode_threshold`` is a row of its own (the RMPC)."""
     ZERO_TOLERANCE_VARIANT: ClassVar[bool] = False
     """Whether the subclass has an exact, cheaper form at epsilon = 0 (``_margin(..., zero=True)``)."""
 
@@ -125,6 +129,9 @@ class PathFollowingMPC:
         max_solve_time: float | None = None,
         soft_penalty: float = SOFT_PENALTY,
         object_slots: int | None = None,
+        predictor: str | Predictor | None = None,
+        modes: int | None = None,
+        mode_threshold: float = MODE_THRESHOLD,
     ) -> None:
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env Scenario, got {type(scenario).__name__}")
@@ -140,12 +147,16 @@ class PathFollowingMPC:
         self.scenario = scenario
         self.slots = check_slots(object_slots, scenario)
         """K, the object slots (fixed at construction)."""
-        self._numbers = slot_numbers(scenario, self.slots)
-        slot_scenarios = [slot_scenario(scenario, k) for k in range(self.slots)]
-        self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in slot_scenarios)
-        """Each slot's risk estimator (its radius, mass and uncertainty)."""
+        chosen = None if predictor in (None, "constant") else make_predictor(predictor, scenario)
+        self._slots = Slots(scenario, self.slots, chosen, modes)
+        self.mode_threshold = check_threshold(mode_threshold)
+        """w_min: the RMPC plans against every mode of at least this weight (the SMPC: all)."""
+        self._numbers = self._slots.numbers
+        scenarios = [self._slots.scenario_of(row) for row in range(self._slots.rows)]
+        self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in scenarios)
+        """Each planning row's risk estimator (object k's radius, mass and uncertainty; row k M + m)."""
         self.estimator = self.estimators[0]
-        self._worsts = tuple(WorstCaseRisk(s) for s in slot_scenarios)
+        self._worsts = tuple(WorstCaseRisk(s) for s in scenarios)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
         self.settings = SolverSettings(
             solver=solver,
@@ -279,12 +290,16 @@ class PathFollowingMPC:
         (``data``: its block ``(N, J, 3)``)."""
         raise NotImplementedError
 
-    def _risk_numpy(self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray) -> np.ndarray:
-        """Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present slots (``futures[k]``
-        not None) of their risks at n = 1..N; zeros when no object is present."""
-        rows = data.shape[1] // self.slots if data.size else 0
+    def _risk_numpy(
+        self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray, weights: Any = None
+    ) -> np.ndarray:
+        """Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present rows (``futures[k]``
+        not None) of their risks at n = 1..N, each times its mode's weight where the risk is an
+        expectation (:attr:`WEIGHTED`); zeros when no object is present."""
+        rows = data.shape[1] // len(futures) if data.size else 0
         terms = [
             self._slot_risk(k, ego, f, data[:, k * rows : (k + 1) * rows])
+            * (weights[k] if self.WEIGHTED and weights is not None and self._slots.given else 1.0)
             for k, f in enumerate(futures)
             if f is not None
         ]
@@ -314,7 +329,8 @@ class PathFollowingMPC:
                 type(self).__name__,
                 variant,
                 problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty, objects: parameters
-                self.slots,
+                self._slots.rows,
+                self._slots.given,
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
                 self._risk_terms(),
@@ -328,7 +344,8 @@ class PathFollowingMPC:
                 self._risk_parameter_shape(),
                 self._risk_value if any(self._risk_terms()) else None,
                 self._risk_terms(),
-                self.slots,
+                self._slots.rows,
+                self._slots.given,
             )
             self._problems[variant] = cached_problem(key, build)
         return self._problems[variant]
@@ -352,7 +369,7 @@ class PathFollowingMPC:
         try:
             with Budget.open(self.max_solve_time) as budget:
                 data = self._measure(index, obs_vec)
-                result = Step(self._context(), data, budget).run()
+                result = Step(self._context(data.weights), data, budget).run()
         finally:
             if collecting:
                 gc.enable()
@@ -361,15 +378,15 @@ class PathFollowingMPC:
         self.failures += int(result.failed)
         return result.report
 
-    def _context(self) -> StepContext:
-        """What a step uses that the controller owns."""
+    def _context(self, weights: np.ndarray | None = None) -> StepContext:
+        """What a step uses that the controller owns (the risk with the rows' ``weights``)."""
         return StepContext(
             scenario=self.scenario,
             settings=self.settings,
             problem=self._problem,
             built=self._problems,
             call=self._call,
-            risk=self._risk_numpy,
+            risk=functools.partial(self._risk_numpy, weights=weights),
             worsts=self._worsts,
             pilot=self._pilot_plan,
             maps=self._maps,
@@ -389,12 +406,18 @@ class PathFollowingMPC:
         if memory is not None and measure.new_episode(memory, o):
             memory = None
         x0 = measure.measured_state(self.scenario, o)
-        numbers = self._numbers
-        futures = measure.slot_beliefs(self._problem("free"), o, numbers)
-        # a slot is active when its object is present and may reach the ego within the horizon
-        active = np.array([f is not None and self._risk_possible(x0, f, k) for k, f in enumerate(futures)])
+        futures, weights = self._slots.beliefs(self._problem("free"), o)
+        # a row is active when its object is present, its mode counts (the RMPC: w >= w_min) and
+        # it may reach the ego within the horizon
+        floor = self.mode_threshold if not self.WEIGHTED else 0.0
+        counts = [f is not None and weights[k] > 0 and weights[k] >= floor for k, f in enumerate(futures)]
+        active = np.array([c and self._risk_possible(x0, futures[k], k) for k, c in enumerate(counts)])
         variant = self._risk_variant() if active.any() else "free"
         data = self._risk_data(futures)
         terms = self._terms_parameters(index, memory is None)
-        p = parameter_vector(self._epsilon, self.scenario.ego.v_ref, o.objects, active, numbers, data, terms)
-        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p)
+        objects = np.repeat(o.objects, self._slots.modes, axis=0)
+        p = parameter_vector(
+            self._epsilon, self.scenario.ego.v_ref, objects, active, self._numbers, data, terms
+        )
+        p = np.concatenate([p, self._slots.given_block(futures, weights)])
+        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p, weights)

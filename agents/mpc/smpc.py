@@ -11,7 +11,7 @@ import numpy as np
 from agents.base import SolveReport
 from agents.mpc.controller import PathFollowingMPC
 from agents.mpc.nlp import risk_budget as rb
-from agents.mpc.nlp.parameters import INACTIVE
+from agents.mpc.nlp.parameters import INACTIVE, NUMBER_COLUMNS
 from agents.mpc.objects import slot_rows, symbolic
 from risk_env.models.ops import CASADI
 from risk_env.prediction.belief import Belief
@@ -90,6 +90,7 @@ class SMPC(PathFollowingMPC):
 
     RISK_METHODS = ("exact", "monte_carlo")
     ZERO_TOLERANCE_VARIANT = True
+    WEIGHTED = True
 
     def __init__(
         self,
@@ -204,7 +205,8 @@ class SMPC(PathFollowingMPC):
                 r = est.casadi_risk(ego, belief, samples=slot_rows(data, k, J))
             else:
                 r = est.solver_risk(ego, belief)
-            total = numbers[k, 0] * r if total is None else total + numbers[k, 0] * r
+            share = numbers[k, 0] if numbers.shape[1] <= NUMBER_COLUMNS else numbers[k, 0] * numbers[k, 3]
+            total = share * r if total is None else total + share * r
         return total
 
     def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
@@ -247,12 +249,12 @@ class SMPC(PathFollowingMPC):
                     soft = nearest - t * ca.log(ca.sum1(ca.exp(-(dist - nearest) / t)))
                     clearances.append(soft - radius + lift)
                 else:
-                    risks.append(active * est.casadi_risk(ego, belief, samples=draws))
+                    risks.append(weighted(active, numbers, k) * est.casadi_risk(ego, belief, samples=draws))
                 continue
             box = symbolic(self._worsts[k], radius, numbers[k, 2])
             clearances.append(box.distance(ego, belief, CASADI) - radius + lift)
             if not zero:
-                risks.append(active * est.solver_risk(ego, belief))
+                risks.append(weighted(active, numbers, k) * est.solver_risk(ego, belief))
         if zero:  # R <= 0 <=> every disc misses every possible object position (box / draws)
             return ca.vertcat(*clearances)
         total = risks[0]
@@ -302,3 +304,10 @@ class SMPC(PathFollowingMPC):
         if self.risk_method == "monte_carlo":
             return self.estimators[slot].risk(ego, belief, draws=np.moveaxis(data, 1, 0))
         return self.estimators[slot].risk(ego, belief)
+
+
+def weighted(active: ca.SX, numbers: ca.SX, row: int) -> ca.SX:
+    """A row's factor on its risk in the expectation: its active flag, times its mode's weight
+    w with given beliefs (a fourth column of ``numbers``); the mixture's risk is then
+    ``sum_m w_m R_m``, exact by linearity of expectation."""
+    return active if numbers.shape[1] <= NUMBER_COLUMNS else active * numbers[row, 3]

@@ -121,6 +121,8 @@ class StepInput:
     variant: str
     data: np.ndarray
     p: np.ndarray
+    weights: np.ndarray | None = None
+    """Each row's mode weight w ``(K M,)`` (1 for the paper's prediction)."""
 
 
 @dataclass(frozen=True)
