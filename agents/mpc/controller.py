@@ -11,11 +11,11 @@ import math
 import os
 from typing import Any, ClassVar
 
-import casadi as ca
 import numpy as np
 
 from agents.base import SolveReport, predict_each
 from agents.mpc import measure
+from agents.mpc.hooks import RiskForm
 from agents.mpc.measure import FREE_MARGIN
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, soft_variant
@@ -48,7 +48,7 @@ SOFT_PENALTY = 1e4
 """Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
 
 
-class PathFollowingMPC:
+class PathFollowingMPC(RiskForm):
     """Path-following MPC with a risk constraint; the subclasses say which (:class:`agents.RMPC`,
     :class:`agents.SMPC`). The problem is in :mod:`agents.mpc.nlp.ocp`, its solver in
     :mod:`agents.mpc.nlp.solver`.
@@ -99,6 +99,13 @@ class PathFollowingMPC:
             against every present object (:mod:`agents.mpc.objects`); slot k takes object k's radius,
             mass and uncertainty, slots beyond the scenario's objects the last object's. An
             observation with another slot count raises ``ValueError`` naming both.
+        predictor: the objects' prediction: ``None`` or ``"constant"`` (the paper's, made inside the
+            NLP from each slot's measurement) or any :class:`risk_env.prediction.Predictor`,
+            whose modes (likeliest first) fill ``modes`` rows per object slot as solver
+            parameters: one built solver serves every scene (:class:`agents.mpc.objects.Slots`).
+        modes: M, the mode slots per object (default 3 with a predictor, 1 without).
+        mode_threshold: w_min in [0, 1]: the RMPC plans against every mode of at least this weight
+            (the likeliest alone when none is); the SMPC against all, each weighted.
     """
 
     risk_method: str = ""
@@ -254,42 +261,6 @@ class PathFollowingMPC:
         self.last_solve = reports[-1]
         return actions, None
 
-    # ------------------------------------------------------------------ subclass hooks
-    def _estimator_key(self) -> tuple[Any, ...]:
-        """What, besides the scenario and the solver settings, changes the built problem."""
-        raise NotImplementedError
-
-    def _estimator(self, scenario: Scenario) -> RiskEstimator:
-        """The agent's estimator for one slot's single-object ``scenario``."""
-        raise NotImplementedError
-
-    def _risk_parameter_shape(self) -> tuple[int, int]:
-        """Shape of the per-step risk data parameter ((0, 0): none)."""
-        return (0, 0)
-
-    def _margin(
-        self, ego: ca.SX, beliefs: list[Belief], epsilon: ca.SX, data: ca.SX, numbers: ca.SX, zero: bool
-    ) -> ca.SX:
-        """Symbolic rows of one stage (:data:`agents.mpc.nlp.ocp.Margin`), each >= 0 iff the risk bound
-        holds at this step for every active slot; ``zero``: the form for epsilon = 0 (only with
-        :attr:`ZERO_TOLERANCE_VARIANT`)."""
-        raise NotImplementedError
-
-    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
-        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, and
-        the solver iterations that took; None: start from the rollouts."""
-        return None
-
-    def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
-        """Per-step risk data ``(N, K J, 3)`` for one solve, the slots' blocks stacked (Monte
-        Carlo: fresh draws for the present slots, zeros for the absent ones)."""
-        return np.zeros((self.horizon, 0, 0))
-
-    def _slot_risk(self, slot: int, ego: np.ndarray, belief: Belief, data: np.ndarray) -> np.ndarray:
-        """Slot ``slot``'s risk ``(N,)`` of ego states ``(N, 4)`` against its beliefs at n = 1..N
-        (``data``: its block ``(N, J, 3)``)."""
-        raise NotImplementedError
-
     def _risk_numpy(
         self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray, weights: Any = None
     ) -> np.ndarray:
@@ -304,21 +275,6 @@ class PathFollowingMPC:
             if f is not None
         ]
         return combine(terms) if terms else np.zeros(np.shape(ego)[:-1])
-
-    def _risk_terms(self) -> tuple[bool, bool]:
-        """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
-        risk in its objective (:mod:`agents.mpc.nlp.risk_budget`); neither by default."""
-        return (False, False)
-
-    def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
-        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`): the
-        sum over the active slots (:data:`agents.mpc.nlp.ocp.RiskValue`)."""
-        raise NotImplementedError
-
-    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
-        """The risk terms' parameters (:data:`agents.mpc.nlp.parameters.TERMS`) of batch entry
-        ``index`` (empty without terms); ``new_episode``: its memory was dropped."""
-        return np.zeros(0)
 
     def _risk_variant(self) -> str:
         return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
