@@ -276,8 +276,10 @@ class PathFollowingMPC(RiskForm):
         ]
         return combine(terms) if terms else np.zeros(np.shape(ego)[:-1])
 
-    def _risk_variant(self) -> str:
-        return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
+    def _risk_variant(self, epsilon: float | None = None) -> str:
+        """The risk rows' form at ``epsilon`` (default: the agent's)."""
+        epsilon = self._epsilon if epsilon is None else epsilon
+        return "zero" if self.ZERO_TOLERANCE_VARIANT and epsilon <= 0.0 else "general"
 
     def _problem(self, variant: str) -> Problem:
         if variant not in self._problems:
@@ -325,7 +327,7 @@ class PathFollowingMPC(RiskForm):
         try:
             with Budget.open(self.max_solve_time) as budget:
                 data = self._measure(index, obs_vec)
-                result = Step(self._context(data.weights), data, budget).run()
+                result = Step(self._context(data), data, budget).run()
         finally:
             if collecting:
                 gc.enable()
@@ -334,8 +336,11 @@ class PathFollowingMPC(RiskForm):
         self.failures += int(result.failed)
         return result.report
 
-    def _context(self, weights: np.ndarray | None = None) -> StepContext:
-        """What a step uses that the controller owns (the risk with the rows' ``weights``)."""
+    def _context(self, data: StepInput | None = None) -> StepContext:
+        """What a step uses that the controller owns (its risk with the rows' weights and its
+        epsilon: ``data``'s)."""
+        weights = None if data is None else data.weights
+        epsilon = self._epsilon if data is None else data.epsilon
         return StepContext(
             scenario=self.scenario,
             settings=self.settings,
@@ -344,9 +349,9 @@ class PathFollowingMPC(RiskForm):
             call=self._call,
             risk=functools.partial(self._risk_numpy, weights=weights),
             worsts=self._worsts,
-            pilot=self._pilot_plan,
+            pilot=functools.partial(self._pilot_plan, epsilon=epsilon),
             maps=self._maps,
-            epsilon=self._epsilon,
+            epsilon=epsilon,
             backoff=self.backoff,
             cold_starts=self.cold_starts,
             max_solve_time=self.max_solve_time,
@@ -368,12 +373,11 @@ class PathFollowingMPC(RiskForm):
         floor = self.mode_threshold if not self.WEIGHTED else 0.0
         counts = [f is not None and weights[k] > 0 and weights[k] >= floor for k, f in enumerate(futures)]
         active = np.array([c and self._risk_possible(x0, futures[k], k) for k, c in enumerate(counts)])
-        variant = self._risk_variant() if active.any() else "free"
+        epsilon = self._step_epsilon(index, memory is None)
+        variant = self._risk_variant(epsilon) if active.any() else "free"
         data = self._risk_data(futures)
         terms = self._terms_parameters(index, memory is None)
         objects = np.repeat(o.objects, self._slots.modes, axis=0)
-        p = parameter_vector(
-            self._epsilon, self.scenario.ego.v_ref, objects, active, self._numbers, data, terms
-        )
+        p = parameter_vector(epsilon, self.scenario.ego.v_ref, objects, active, self._numbers, data, terms)
         p = np.concatenate([p, self._slots.given_block(futures, weights)])
-        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p, weights)
+        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p, weights, epsilon)

@@ -37,10 +37,17 @@ class RiskForm:
         :attr:`ZERO_TOLERANCE_VARIANT`)."""
         raise NotImplementedError
 
-    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
-        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, and
-        the solver iterations that took; None: start from the rollouts."""
+    def _pilot_plan(
+        self, index: int, obs_vec: np.ndarray, variant: str, epsilon: float = 0.0
+    ) -> tuple[np.ndarray, int] | None:
+        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem at
+        the step's ``epsilon``, and the solver iterations that took; None: start from the rollouts."""
         return None
+
+    def _step_epsilon(self, index: int, new_episode: bool) -> float:
+        """epsilon of batch entry ``index``'s step (``new_episode``: its memory was dropped): the
+        agent's, unless a budget allocates it step by step (:class:`agents.SMPC`)."""
+        return self._epsilon
 
     def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
         """Per-step risk data ``(N, K J, 3)`` for one solve, the slots' blocks stacked (Monte

@@ -123,6 +123,8 @@ class StepInput:
     p: np.ndarray
     weights: np.ndarray | None = None
     """Each row's mode weight w ``(K M,)`` (1 for the paper's prediction)."""
+    epsilon: float = 0.0
+    """The step's risk tolerance (the agent's, or its share of an episode budget)."""
 
 
 @dataclass(frozen=True)
