@@ -188,11 +188,13 @@ class PathFollowingMPC(RiskForm):
         self.last_solve: SolveReport | None = None
         self.last_solves: list[SolveReport] = []
         self._memory: dict[int, dict[str, Any]] = {}
-        self._problems: dict[str, Problem] = {}
+        self._problems: dict[tuple[str, int], Problem] = {}
         self._maps: dict[tuple[str, str, str], np.ndarray] = {}
         self._manoeuvre_time = MANOEUVRE_TIME
         variant = self._risk_variant()
-        built = [self._problem(v) for v in ("free", variant, soft_variant(variant))]
+        variants = ("free", variant, soft_variant(variant))
+        # given beliefs: the NLPs of as many rows as a step needs are built when it first does
+        built = [self._problem(v, 1 if self._slots.given else None) for v in variants]
         self.build_time = sum(p.build_time for p in built)
         """Seconds spent building (with jit: compiling) the solvers at construction; 0 when they came
         from the process-wide cache."""
@@ -281,13 +283,15 @@ class PathFollowingMPC(RiskForm):
         epsilon = self._epsilon if epsilon is None else epsilon
         return "zero" if self.ZERO_TOLERANCE_VARIANT and epsilon <= 0.0 else "general"
 
-    def _problem(self, variant: str) -> Problem:
-        if variant not in self._problems:
+    def _problem(self, variant: str, rows: int | None = None) -> Problem:
+        """The built NLP of ``variant`` with ``rows`` rows of beliefs (default: every row)."""
+        rows = self._slots.rows if rows is None else rows
+        if (variant, rows) not in self._problems:
             key = (
                 type(self).__name__,
                 variant,
                 problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty, objects: parameters
-                self._slots.rows,
+                rows,
                 self._slots.given,
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
@@ -302,11 +306,11 @@ class PathFollowingMPC(RiskForm):
                 self._risk_parameter_shape(),
                 self._risk_value if any(self._risk_terms()) else None,
                 self._risk_terms(),
-                self._slots.rows,
+                rows,
                 self._slots.given,
             )
-            self._problems[variant] = cached_problem(key, build)
-        return self._problems[variant]
+            self._problems[variant, rows] = cached_problem(key, build)
+        return self._problems[variant, rows]
 
     def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:
         """:func:`agents.mpc.measure.risk_possible` for slot ``slot``'s object."""
@@ -341,11 +345,12 @@ class PathFollowingMPC(RiskForm):
         epsilon: ``data``'s)."""
         weights = None if data is None else data.weights
         epsilon = self._epsilon if data is None else data.epsilon
+        rows = self._slots.rows if data is None or data.rows is None else data.rows
         return StepContext(
             scenario=self.scenario,
             settings=self.settings,
-            problem=self._problem,
-            built=self._problems,
+            problem=functools.partial(self._problem, rows=rows),
+            built={v: pr for (v, r), pr in self._problems.items() if r == rows},
             call=self._call,
             risk=functools.partial(self._risk_numpy, weights=weights),
             worsts=self._worsts,
@@ -378,6 +383,12 @@ class PathFollowingMPC(RiskForm):
         data = self._risk_data(futures)
         terms = self._terms_parameters(index, memory is None)
         objects = np.repeat(o.objects, self._slots.modes, axis=0)
-        p = parameter_vector(epsilon, self.scenario.ego.v_ref, objects, active, self._numbers, data, terms)
-        p = np.concatenate([p, self._slots.given_block(futures, weights)])
-        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p, weights, epsilon)
+        rows, keep = self._slots.packing(active, data.size > 0)
+        p = parameter_vector(
+            epsilon, self.scenario.ego.v_ref, objects[keep], active[keep], self._numbers[keep], data, terms
+        )
+        packed = [futures[j] if active[j] else None for j in keep]
+        p = np.concatenate([p, self._slots.given_block(packed, weights[keep])])
+        return StepInput(
+            index, obs_vec, memory, x0, futures, active, variant, data, p, weights, epsilon, rows
+        )

@@ -151,13 +151,26 @@ class Slots:
                 weights[row] = mode.weight
         return futures, weights
 
+    def packing(self, active: np.ndarray, data: bool) -> tuple[int | None, np.ndarray]:
+        """``(rows of the NLP, which rows fill them)``: with given beliefs (and no risk data) the
+        active rows, packed into the smallest of :data:`CAPACITIES` that holds them, so that rows
+        that cannot matter cost nothing (the rest of the NLP's rows absent: the first row's
+        numbers, inactive); else every row (None: the full NLP)."""
+        if not self.given or data:
+            return None, np.arange(self.rows)
+        index = np.flatnonzero(active)
+        rows = next((c for c in CAPACITIES if c >= max(len(index), 1)), self.rows)
+        rows = min(rows, self.rows)
+        filler = np.setdiff1d(np.arange(self.rows), index)[: rows - len(index)]
+        return rows, np.concatenate([index, filler]).astype(int)
+
     def given_block(self, futures: list[Belief | None], weights: np.ndarray) -> np.ndarray:
         """The given beliefs' parameters (:func:`agents.mpc.nlp.parameters.given_vector`); empty
         without a predictor."""
         if not self.given:
             return np.zeros(0)
         N = self.scenario.horizon
-        fields = np.zeros((self.rows, N, Belief.SIZE))
+        fields = np.zeros((len(futures), N, Belief.SIZE))
         fields[..., 4:9] = 1.0  # absent rows: unit spreads (no division by 0), weight 0
         for row, f in enumerate(futures):
             if f is not None:
@@ -165,6 +178,9 @@ class Slots:
         return given_vector(weights, fields)
 
 
+CAPACITIES: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
+"""The NLPs built for given beliefs, by rows (each lazily): a step runs the smallest that holds its
+active rows."""
 MODES = 3
 """Mode slots per object with a predictor, by default: straight, left and right at a junction."""
 

@@ -125,6 +125,8 @@ class StepInput:
     """Each row's mode weight w ``(K M,)`` (1 for the paper's prediction)."""
     epsilon: float = 0.0
     """The step's risk tolerance (the agent's, or its share of an episode budget)."""
+    rows: int | None = None
+    """The rows of beliefs of the NLP that runs (the active rows packed; None: all)."""
 
 
 @dataclass(frozen=True)
