@@ -21,6 +21,7 @@ It prints two tables (and writes them to ``OUT/env_speed.txt``, ``env_speed_near
 
 Each repetition times every env in turn, so that a busy machine slows them alike; shown is the best
 of R repetitions (time.perf_counter). The ratios travel between machines; the absolute times do not.
+``--out`` writes the tables with their manifest (:mod:`benchmarks.output`).
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -136,17 +136,16 @@ def risk_times(
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.env_speed``."""
     parser = cli.parser("env_speed", __doc__)
-    parser.add_argument("--steps", type=int, default=2000, help="env steps per repetition")
-    parser.add_argument("--repeat", type=int, default=5, help="repetitions; the best is shown")
-    parser.add_argument("--batch", type=int, default=1000, help="ego states in the batch")
+    parser.add_argument("--steps", type=cli.positive_int, default=2000, help="env steps per repetition")
+    parser.add_argument("--repeat", type=cli.positive_int, default=5, help="repetitions; the best is shown")
+    parser.add_argument("--batch", type=cli.positive_int, default=1000, help="ego states in the batch")
     parser.add_argument(
         "--near-only", action="store_true", help="batch only ego states whose disc meets the truncation box"
     )
-    parser.add_argument(
-        "--out",
-        type=Path,
-        default=None,
-        help="also write the tables to OUT/env_speed.txt (OUT/env_speed_near.txt with --near-only)"
+    cli.add_output_options(
+        parser,
+        None,
+        "also write the tables to OUT/env_speed.txt (OUT/env_speed_near.txt with --near-only)"
         " (default: print only; the committed ones are in docs/results)",
     )
     return parser
@@ -155,8 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> str:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.steps < 1 or args.repeat < 1 or args.batch < 1:
-        parser.error("--steps, --repeat and --batch must be >= 1")
+    name = "env_speed_near" if args.near_only else "env_speed"
+    out = None if args.out is None else cli.open_output(parser, args, name, [f"{name}.txt"], argv)
 
     ours = {name: {"risk_estimator": name} for name in ESTIMATOR_NAMES}
     ours["exact, sampled"] = {"risk_estimator": "exact", "object_motion": "sampled"}
@@ -199,10 +198,9 @@ def main(argv: list[str] | None = None) -> str:
     lines += ["", "Targets (Pendulum-v1 steps per step): " + "; ".join(verdicts)]
     text = "\n".join(lines) + "\n"
     print(text, end="")
-    if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        name = "env_speed_near.txt" if args.near_only else "env_speed.txt"
-        (args.out / name).write_text(text)
+    if out is not None:
+        with out:
+            (out.dir / f"{name}.txt").write_text(text)
     return text
 
 

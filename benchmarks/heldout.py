@@ -19,11 +19,13 @@ scene:
   from the path.
 
 The objects start far enough from the ego that the first step is feasible, so every collision
-would be the agents' own. Per agent (``rmpc``: worst case; ``smpc``: exact risk, epsilon = 0) the
-benchmark reports collisions (with a Wilson 95 % interval), goal rate, steps, fallbacks per
+would be the agents' own. Per agent (named as in every command, :mod:`benchmarks.agent_names`;
+``rmpc``: worst case; ``smpc``: exact risk, epsilon = 0 in the paper's severity unless it names
+its own) the benchmark reports collisions (with a Wilson 95 % interval), goal rate, steps, fallbacks per
 episode and failed solver calls, and the smallest distance to either object. Episodes run without the
 MPC's wall-time cap by default (``--max-solve-time inf``: results independent of the machine's
-load). Outputs in ``--out``: ``heldout.md`` and ``heldout.csv`` (one row per episode).
+load). Outputs in ``--out``: ``heldout.md`` and ``heldout.csv`` (one row per episode), one output
+set (:mod:`benchmarks.output`; ``--resume`` goes on after an interruption).
 """
 
 from __future__ import annotations
@@ -31,8 +33,6 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-import shlex
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,15 +41,23 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from benchmarks.sampled import wilson
+from benchmarks.agent_names import AgentName, parse_agent
+from benchmarks.sampled_rows import wilson
 from benchmarks.sweep import run_sweep
 from risk_env.models.path import point
 from risk_env.scenario.scenario import Scenario
 
 LEVELS: tuple[str, ...] = ("low", "medium", "high")
 MOTIONS: tuple[str, ...] = ("paper", "sampled")
-AGENTS: dict[str, tuple[str, str]] = {"rmpc": ("RMPC", "worst_case"), "smpc": ("SMPC", "exact")}
-"""Agent name -> (method, risk method) of :func:`benchmarks.rollout.build_agent`."""
+FILES = ("heldout.csv", "heldout.md")
+"""The files a run writes in ``--out``."""
+
+
+def agent(name: str) -> AgentName:
+    """The agent ``name`` (an SMPC without a tolerance: epsilon = 0, the paper's severity)."""
+    return parse_agent(name, ("rmpc", "smpc")).with_defaults("paper", 0.0)
+
+
 MIN_AHEAD = 10.0
 """Least arc length [m] between the ego's start and where an object crosses the path."""
 MIN_START = 8.0
@@ -81,10 +89,16 @@ class Scene:
     """Each object's (start (c1 [m], c2 [m], theta [rad]), speed [m/s])."""
     seed: int
 
-    def scenario(self) -> Scenario:
-        """The scene's scenario at epsilon = 0."""
+    def scenario(self, risk_tolerance: float = 0.0, severity: str = "paper") -> Scenario:
+        """The scene's scenario (epsilon ``risk_tolerance`` in the unit of ``severity``)."""
         objects = [{"start": start, "speed": speed, "turn_rate": 1e-4} for start, speed in self.objects]
-        return Scenario.preset(self.uncertainty, objects=objects, v_ref=self.v_ref, risk_tolerance=0.0)
+        return Scenario.preset(
+            self.uncertainty,
+            objects=objects,
+            v_ref=self.v_ref,
+            risk_tolerance=risk_tolerance,
+            severity=severity,
+        )
 
 
 def make_scenes(count: int, seed: int = 0) -> list[Scene]:
@@ -128,12 +142,13 @@ def run_job(job: Job) -> dict[str, Any]:
     import gymnasium as gym
 
     import risk_env  # noqa: F401
-    from benchmarks.rollout import build_agent, rollout
+    from benchmarks.rollout import build, rollout
 
     scene = job.scene
-    env = gym.make("RiskCrossing-v0", scenario=scene.scenario(), object_motion=scene.motion)
-    agent = build_agent(*AGENTS[job.agent], env, max_solve_time=job.max_solve_time)
-    rec = rollout(agent, env, seed=scene.seed)
+    name = agent(job.agent)
+    scenario = scene.scenario(name.tolerance or 0.0, name.severity or "paper")
+    env = gym.make("RiskCrossing-v0", scenario=scenario, object_motion=scene.motion)
+    rec = rollout(build(name, env, max_solve_time=job.max_solve_time), env, seed=scene.seed)
     env.close()
     return {
         "agent": job.agent,
@@ -174,7 +189,7 @@ def markdown(summary: list[dict[str, Any]], command: str, wall: float, count: in
     lines = [
         f"`{command}`",
         "",
-        f"{count} held-out two-object scenes (benchmarks.heldout, seed {seed}), epsilon = 0. Wall time"
+        f"{count} held-out two-object scenes (benchmarks.heldout, seed {seed}). Wall time"
         f" {wall:.0f} s. Collisions: count of episodes [Wilson 95 % interval]. d_min: smallest"
         " centre distance to either object over all episodes [m] (collision below r_e + r_o = 2 m).",
         "",
@@ -195,47 +210,46 @@ def markdown(summary: list[dict[str, Any]], command: str, wall: float, count: in
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.heldout``."""
     p = cli.parser("heldout", __doc__)
-    p.add_argument("--scenes", type=int, default=30, help="held-out scenes per agent")
-    p.add_argument("--seed", type=int, default=0, help="the generator's seed")
-    p.add_argument("--agents", default="rmpc,smpc", help="comma-separated: rmpc, smpc")
+    p.add_argument("--scenes", type=cli.positive_int, default=30, help="held-out scenes per agent")
+    p.add_argument("--seed", type=cli.nonnegative_int, default=0, help="the generator's seed")
     p.add_argument(
-        "--max-solve-time", type=float, default=math.inf, help="the MPCs' wall-time cap per step [s]"
+        "--agents",
+        type=cli.agents_list(("rmpc", "smpc")),
+        default="rmpc,smpc",
+        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]",
     )
-    p.add_argument("--out", type=Path, default=Path("results/heldout"), help="output directory")
+    p.add_argument(
+        "--max-solve-time", type=cli.time_cap, default=math.inf, help="the MPCs' wall-time cap per step [s]"
+    )
+    cli.add_output_options(p, Path("results/heldout"), "output directory", resume=True)
     cli.add_sweep_options(p)
     return p
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = build_parser()
+def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None = None) -> argparse.Namespace:
+    p = p or build_parser()
     args = p.parse_args(argv)
-    args.agents = cli.comma_list(args.agents)
-    for a in args.agents:
-        if a not in AGENTS:
-            p.error(f"unknown agent {a!r}; expected one of {tuple(AGENTS)}")
-    if args.scenes < 1:
-        p.error("--scenes must be >= 1")
+    args.agents = [str(agent(str(a))) for a in args.agents]
     return args
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    args = parse_args(argv)
-    command = "python -m benchmarks.heldout " + " ".join(
-        shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)
-    )
+    p = build_parser()
+    args = parse_args(argv, p)
+    out = cli.open_output(p, args, "heldout", FILES, argv)
     scenes = make_scenes(args.scenes, args.seed)
     jobs = [Job(a, s, args.max_solve_time) for a in args.agents for s in scenes]
-    t0 = time.perf_counter()
-    rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="held-out episodes")
-    wall = time.perf_counter() - t0
-    summary = [summarise(a, [r for r in rows if r["agent"] == a]) for a in args.agents]
-    args.out.mkdir(parents=True, exist_ok=True)
-    with (args.out / "heldout.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
-    text = markdown(summary, command.strip(), wall, args.scenes, args.seed)
-    (args.out / "heldout.md").write_text(text)
+    with out:
+        t0 = time.perf_counter()
+        rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="held-out episodes", store=out.store)
+        wall = time.perf_counter() - t0
+        summary = [summarise(a, [r for r in rows if r["agent"] == a]) for a in args.agents]
+        with (out.dir / "heldout.csv").open("w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=COLUMNS)
+            writer.writeheader()
+            writer.writerows(rows)
+        text = markdown(summary, out.command_line.strip(), wall, args.scenes, args.seed)
+        (out.dir / "heldout.md").write_text(text)
     print(text)
     return rows
 

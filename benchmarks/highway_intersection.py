@@ -2,19 +2,21 @@
 
     python -m benchmarks.highway_intersection --episodes 4 --agents rmpc,idm     # a quick look
     python -m benchmarks.highway_intersection --episodes 200 --out docs/results/highway \\
-        --agents rmpc,smpc:probability:0.01,smpc:injury:0.001,idm
+        --agents rmpc,smpc:probability:0.01,idm
 
 Each agent drives the controlled vehicle of ``intersection-v2`` (``--env intersection-v1``
 selectable; :data:`~risk_env.highway.adapter.INTERSECTION_CONFIG`: the kinematic vehicle with
 continuous actions, T = 0.5 s, highway-env's traffic, the left turn to ``"o1"``, 13 s) over the
-same seeded episodes (seeds S..S+E-1; the traffic then reacts to the ego). Agents (``--agents``):
+same seeded episodes (seeds S..S+E-1; the traffic then reacts to the ego). Agents (``--agents``,
+named as in every command, :mod:`benchmarks.agent_names`):
 
-- ``rmpc``: :class:`agents.RMPC` (worst case, exact box form) through :class:`IntersectionAdapter`
-  with ``--slots`` object slots (default 5): one solve plans against every observed vehicle, the
-  nearest first, up to the slot count;
-- ``smpc[:SEVERITY:TOLERANCE]``: :class:`agents.SMPC` (exact risk) through the adapter, with its own
-  severity and epsilon (default: ``--severity``, ``--tolerance``), e.g. ``smpc:probability:0.01``
-  (a collision chance of at most 1 % per step under the prediction) or ``smpc:injury:0.001``;
+- ``rmpc[:RISK]``: :class:`agents.RMPC` (default: worst case, exact box form) through
+  :class:`IntersectionAdapter` with ``--slots`` object slots (default 5): one solve plans against
+  every observed vehicle, the nearest first, up to the slot count;
+- ``smpc[:RISK][:SEVERITY:TOLERANCE]``: :class:`agents.SMPC` (default: exact risk) through the
+  adapter, with its own severity and epsilon (default: ``--severity``, ``--tolerance``), e.g.
+  ``smpc:probability:0.01`` (a collision chance of at most 1 % per step under the prediction) or
+  ``smpc:injury:0.001``;
 - ``idm``: :class:`IDMEgo`, highway-env's ``IDMVehicle`` on the same route (its reference driver).
 
 **Collision kinds** (from the simulator's states at the start of the step that ended in the
@@ -29,7 +31,8 @@ timeouts, the MPC's fallbacks (soft or manoeuvre steps) per episode, solve time 
 p95 / max; and over the steps with every slot occupied), and the risk scored by
 :class:`RiskCostWrapper` (exact) with ``--severity``. Episodes run in a process pool
 (:mod:`benchmarks.sweep`, ``--workers``). Outputs in ``--out``: ``intersection.md``,
-``intersection.csv`` (summary) and ``intersection_episodes.csv``.
+``intersection.csv`` (summary) and ``intersection_episodes.csv``, one output set
+(:mod:`benchmarks.output`; ``--resume`` goes on after an interruption).
 """
 
 from __future__ import annotations
@@ -38,7 +41,6 @@ import argparse
 import csv
 import functools
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -46,32 +48,36 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
-from benchmarks.sampled import wilson
+from benchmarks.agent_names import AgentName, parse_agent
+from benchmarks.sampled_rows import wilson
 from benchmarks.sweep import run_sweep
 from risk_env.risk.severity import check_tolerance
 from risk_env.scenario.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
-AGENTS = ("rmpc", "smpc", "idm")
-LABELS = {"rmpc": "RMPC (worst case)", "smpc": "SMPC (exact)", "idm": "highway-env IDM"}
+KINDS = ("rmpc", "smpc", "idm")
+FILES = ("intersection.csv", "intersection.md", "intersection_episodes.csv")
+"""The files a run writes in ``--out``."""
 ENVS = ("intersection-v2", "intersection-v1")
 CHUNK = 5
 """Episodes per pool job (each process keeps its env and agents between jobs)."""
 _CACHE: dict[tuple[Any, ...], tuple[Any, Any]] = {}
 
 
-def split_spec(spec: str, args: argparse.Namespace) -> tuple[str, str, float]:
-    """``"smpc:probability:0.01"`` -> ``("smpc", "probability", 0.01)``; missing parts from args."""
-    parts = spec.split(":")
-    name = parts[0]
-    severity = parts[1] if len(parts) > 1 else args.severity
-    tolerance = float(parts[2]) if len(parts) > 2 else args.tolerance
-    return name, severity, tolerance
+def agent(spec: str, args: argparse.Namespace) -> AgentName:
+    """The agent ``spec`` names, an SMPC without its own severity and tolerance given ``--severity``
+    and ``--tolerance``."""
+    return parse_agent(spec, KINDS, budget=False).with_defaults(args.severity, args.tolerance)
 
 
 def label(spec: str, args: argparse.Namespace) -> str:
-    """``"smpc:injury:0.001"`` -> ``"SMPC (exact), injury, eps 0.001"``."""
-    name, severity, tolerance = split_spec(spec, args)
-    return LABELS[name] if name == "idm" else f"{LABELS[name]}, {severity}, eps {tolerance:g}"
+    """``"smpc:injury:0.001"`` -> ``"SMPC (exact risk), injury severity, epsilon 0.001"``."""
+    a = agent(spec, args)
+    if a.kind == "idm":
+        return "highway-env IDM"
+    risk = a.variant.replace("_", " ")
+    if a.kind == "rmpc":
+        return f"RMPC ({risk} risk)"
+    return f"SMPC ({risk} risk), {a.severity} severity, epsilon {a.tolerance:g}"
 
 
 def make_driver(spec: str, env: Any, args: argparse.Namespace) -> Any:
@@ -79,18 +85,18 @@ def make_driver(spec: str, env: Any, args: argparse.Namespace) -> Any:
     from agents import RMPC, SMPC
     from risk_env.highway import IDMEgo, IntersectionAdapter
 
-    name, severity, tolerance = split_spec(spec, args)
-    if name == "idm":
+    a = agent(spec, args)
+    if a.kind == "idm":
         return IDMEgo(env)
-    factory = RMPC if name == "rmpc" else functools.partial(SMPC, risk="exact")
+    factory = functools.partial(RMPC if a.kind == "rmpc" else SMPC, risk=a.variant)
     if args.max_solve_time is not None:
         factory = functools.partial(factory, max_solve_time=args.max_solve_time)
     return IntersectionAdapter(
         env,
         factory,
         uncertainty=args.uncertainty,
-        risk_tolerance=tolerance,
-        severity=severity,
+        risk_tolerance=args.tolerance if a.tolerance is None else a.tolerance,
+        severity=a.severity or args.severity,
         slots=args.slots,
     )
 
@@ -266,7 +272,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         )
         fb = "-" if idm else f"{s['fallbacks']} ({s['episodes_with_fallback']})"
         lines.append(
-            f"| {s['label']} | {n} | {_ci(s['collision'], n)} | {_ci(s['ego_into_vehicle'], n)} |"
+            f"| {s['agent']} | {n} | {_ci(s['collision'], n)} | {_ci(s['ego_into_vehicle'], n)} |"
             f" {_ci(s['vehicle_into_ego'], n)} | {100 * s['goal_rate']:.1f}% |"
             f" {100 * s['timeout_rate']:.1f}% |"
             f" {_f(s['time_to_goal_s'])} | {fb} | {solve} | {full} |"
@@ -277,81 +283,80 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.highway_intersection``."""
     parser = cli.parser("highway_intersection", __doc__)
-    parser.add_argument("--episodes", type=int, default=200, help="seeded episodes per agent")
-    parser.add_argument("--seed", type=int, default=0, help="first seed")
+    parser.add_argument("--episodes", type=cli.positive_int, default=200, help="seeded episodes per agent")
+    parser.add_argument("--seed", type=cli.nonnegative_int, default=0, help="first seed")
     parser.add_argument("--env", choices=ENVS, default=ENVS[0], help="highway-env intersection")
     parser.add_argument(
         "--agents",
+        type=cli.agents_list(KINDS, budget=False),
         default="rmpc,smpc:probability:0.01,idm",
-        help="comma list of rmpc, smpc[:SEVERITY:TOLERANCE], idm",
+        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE], idm",
     )
-    parser.add_argument("--slots", type=int, default=5, help="the MPC's object slots")
+    parser.add_argument("--slots", type=cli.positive_int, default=5, help="the MPC's object slots")
     parser.add_argument("--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="Table I level")
     parser.add_argument("--severity", choices=SEVERITY_NAMES, default="probability", help="severity model")
-    parser.add_argument("--tolerance", type=float, default=0.01, help="epsilon [units of the severity]")
+    parser.add_argument(
+        "--tolerance", type=cli.nonnegative_float, default=0.01, help="epsilon [units of the severity]"
+    )
     parser.add_argument(
         "--max-solve-time",
-        type=float,
+        type=cli.time_cap,
         default=None,
         help="the MPCs' wall-time cap per step [s] (default: theirs, 20 %% of T; inf: none, results"
         " independent of the machine's load)",
     )
-    parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
-    parser.add_argument("--out", type=Path, default=Path("results/highway"), help="output folder")
+    parser.add_argument(
+        "--workers", type=cli.positive_int, default=None, help="processes (default: all cores)"
+    )
+    cli.add_output_options(parser, Path("results/highway"), "output folder", resume=True)
     return parser
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = build_parser()
+def parse_args(
+    argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None
+) -> argparse.Namespace:
+    parser = parser or build_parser()
     args = parser.parse_args(argv)
-    args.agents = cli.comma_list(args.agents)
-    if args.episodes < 1 or args.slots < 1:
-        parser.error("--episodes and --slots must be >= 1")
-    for spec in args.agents:
-        parts = spec.split(":")
-        if parts[0] not in AGENTS or len(parts) > 3 or (parts[0] != "smpc" and len(parts) > 1):
-            parser.error(f"unknown agent {spec!r}; expected rmpc, smpc[:SEVERITY:TOLERANCE] or idm")
-        try:
-            name, severity, tolerance = split_spec(spec, args)
-            if severity not in SEVERITY_NAMES:
-                raise ValueError(
-                    f"unknown severity {severity!r} in {spec!r}; expected one of {SEVERITY_NAMES}"
-                )
-            check_tolerance(tolerance, severity, f"the tolerance of {spec!r}")
-        except ValueError as error:
-            parser.error(str(error))
+    try:
+        check_tolerance(args.tolerance, args.severity, "argument --tolerance:")
+    except ValueError as error:
+        parser.error(str(error))
+    args.agents = [str(agent(str(a), args)) for a in args.agents]
+    if len(set(args.agents)) != len(args.agents):
+        parser.error(f"argument --agents: an agent is named twice ({', '.join(args.agents)})")
     return args
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    args = parse_args(argv)
-    command = "python -m benchmarks.highway_intersection " + " ".join(sys.argv[1:] if argv is None else argv)
-    t0 = time.perf_counter()
+    parser = build_parser()
+    args = parse_args(argv, parser)
+    out = cli.open_output(parser, args, "intersection", FILES, argv)
     seeds = list(range(args.seed, args.seed + args.episodes))
     jobs = [(spec, seeds[i : i + CHUNK], args) for spec in args.agents for i in range(0, len(seeds), CHUNK)]
-    chunks = run_sweep(run_chunk, jobs, workers=args.workers, desc=args.env)
-    rows: dict[str, list[dict[str, Any]]] = {spec: [] for spec in args.agents}
-    for (spec, _, _), chunk in zip(jobs, chunks, strict=True):
-        rows[spec] += chunk
-    wall = time.perf_counter() - t0
-    summary = [summarise(spec, rows[spec], args) for spec in args.agents]
-    args.out.mkdir(parents=True, exist_ok=True)
-    with open(args.out / "intersection.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(summary[0]))
-        writer.writeheader()
-        writer.writerows(summary)
-    fields = ["agent", "seed", "steps", "time_s", "collision", "ego_into_vehicle", "vehicle_into_ego",
-              "goal", "timeout", "risk_mean", "fallbacks"]  # fmt: skip
-    with open(args.out / "intersection_episodes.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=[*fields, "solve_ms_median"])
-        writer.writeheader()
-        for spec in args.agents:
-            for r in rows[spec]:
-                solve = r["solve_times"]
-                median = float(np.median(solve)) * 1e3 if solve.size else ""
-                writer.writerow({k: r[k] for k in fields} | {"solve_ms_median": median})
-    text = markdown(summary, args, wall, command)
-    (args.out / "intersection.md").write_text(text)
+    with out:
+        t0 = time.perf_counter()
+        chunks = run_sweep(run_chunk, jobs, workers=args.workers, desc=args.env, store=out.store)
+        rows: dict[str, list[dict[str, Any]]] = {spec: [] for spec in args.agents}
+        for (spec, _, _), chunk in zip(jobs, chunks, strict=True):
+            rows[spec] += chunk
+        wall = time.perf_counter() - t0
+        summary = [summarise(spec, rows[spec], args) for spec in args.agents]
+        with open(out.dir / "intersection.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(summary[0]))
+            writer.writeheader()
+            writer.writerows(summary)
+        fields = ["agent", "seed", "steps", "time_s", "collision", "ego_into_vehicle", "vehicle_into_ego",
+                  "goal", "timeout", "risk_mean", "fallbacks"]  # fmt: skip
+        with open(out.dir / "intersection_episodes.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=[*fields, "solve_ms_median"])
+            writer.writeheader()
+            for spec in args.agents:
+                for r in rows[spec]:
+                    solve = r["solve_times"]
+                    median = float(np.median(solve)) * 1e3 if solve.size else ""
+                    writer.writerow({k: r[k] for k in fields} | {"solve_ms_median": median})
+        text = markdown(summary, args, wall, out.command_line.strip())
+        (out.dir / "intersection.md").write_text(text)
     print(text)
     return summary
 

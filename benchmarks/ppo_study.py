@@ -4,7 +4,8 @@ few settings, each scored on sampled motion at medium uncertainty, epsilon 0 and
     python -m benchmarks.ppo_study --total-timesteps 1500000 --out docs/results/ppo_study
 
 Writes ``OUT/study.md`` (one row per setting and epsilon) and ``OUT/study.json``; the models go to
-``OUT/models`` (not committed).
+``OUT/models`` (not committed). One output set (:mod:`benchmarks.output`): ``--resume`` keeps the
+settings an interrupted run finished.
 """
 
 from __future__ import annotations
@@ -40,55 +41,67 @@ EPSILONS = (0.0, 2500.0)
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.ppo_study``."""
     p = cli.parser("ppo_study", __doc__)
-    p.add_argument("--total-timesteps", type=int, default=1_500_000, help="env steps per setting")
-    p.add_argument("--episodes", type=int, default=256, help="evaluation episodes per epsilon")
-    p.add_argument("--seed", type=int, default=0, help="training seed of every setting")
-    p.add_argument("--out", type=Path, default=Path("results/ppo_study"), help="output folder")
+    p.add_argument(
+        "--total-timesteps", type=cli.positive_int, default=1_500_000, help="env steps per setting"
+    )
+    p.add_argument("--episodes", type=cli.positive_int, default=256, help="evaluation episodes per epsilon")
+    p.add_argument("--seed", type=cli.nonnegative_int, default=0, help="training seed of every setting")
+    cli.add_output_options(p, Path("results/ppo_study"), "output folder", resume=True)
     return p
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    """Train and score every setting of :data:`SETTINGS` (``--only``: a comma list of them)."""
+    """Train and score every setting of :data:`SETTINGS`."""
     from benchmarks import train_ppo
     from benchmarks.ppo_eval import evaluate
 
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    out = cli.open_output(parser, args, "study", ("study.md", "study.json", "models"), argv)
     rows: list[dict[str, Any]] = []
-    for i, (name, flags) in enumerate(SETTINGS.items()):
-        model = f"setting{i}"
-        argv_one = [
-            *flags,
-            "--risk-weight",
-            "300",
-            "--total-timesteps",
-            str(args.total_timesteps),
-            "--seed",
-            str(args.seed),
-        ]
-        argv_one += ["--out", str(args.out / "models"), "--name", model, "--no-progress-bar"]
-        argv_one += ["--checkpoint-every", "0"]
-        t0 = time.perf_counter()
-        meta = train_ppo.main(argv_one)
-        for eps in EPSILONS:
-            scores = evaluate(args.out / "models" / f"{model}.zip", args.episodes, "medium", eps)
-            rows.append(
-                {
-                    "setting": name,
-                    "flags": " ".join(flags),
-                    "epsilon": eps,
-                    **scores,
-                    "train_s": meta["wall_time_s"],
-                    "steps_per_s": meta["steps_per_s"],
-                }
-            )
-        print(f"{name}: {time.perf_counter() - t0:.0f} s")
-        write(rows, args)
+    with out:
+        for i, (name, flags) in enumerate(SETTINGS.items()):
+            key = f"setting{i}"
+            if key in out.store:
+                rows += out.store.get(key)
+                continue
+            model = f"setting{i}"
+            models = out.dir / "models"
+            argv_one = [
+                *flags,
+                "--risk-weight",
+                "300",
+                "--total-timesteps",
+                str(args.total_timesteps),
+                "--seed",
+                str(args.seed),
+            ]
+            argv_one += ["--out", str(models), "--name", model, "--no-progress-bar", "--overwrite"]
+            argv_one += ["--checkpoint-every", "0"]
+            t0 = time.perf_counter()
+            meta = train_ppo.main(argv_one)
+            found = []
+            for eps in EPSILONS:
+                scores = evaluate(models / f"{model}.zip", args.episodes, "medium", eps)
+                found.append(
+                    {
+                        "setting": name,
+                        "flags": " ".join(flags),
+                        "epsilon": eps,
+                        **scores,
+                        "train_s": meta["wall_time_s"],
+                        "steps_per_s": meta["steps_per_s"],
+                    }
+                )
+            out.store.put(key, found)
+            rows += found
+            print(f"{name}: {time.perf_counter() - t0:.0f} s")
+        write(rows, args, out.dir)
     return rows
 
 
-def write(rows: list[dict[str, Any]], args: argparse.Namespace) -> None:
-    """``study.md`` and ``study.json`` of the rows so far."""
-    args.out.mkdir(parents=True, exist_ok=True)
+def write(rows: list[dict[str, Any]], args: argparse.Namespace, folder: Path) -> None:
+    """``study.md`` and ``study.json`` of the rows in ``folder``."""
     lines = [
         f"PPO study: {args.total_timesteps:,} env steps per setting (seed {args.seed}); scored on"
         f" {args.episodes} episodes each (sampled motion, medium uncertainty)",
@@ -102,8 +115,8 @@ def write(rows: list[dict[str, Any]], args: argparse.Namespace) -> None:
             f" | {100 * r['goal_rate']:.1f}% | {r['episode_cost']:.3g} | {r['d_min']:.1f}"
             f" | {r['train_s']:.0f} | {r['steps_per_s']:,.0f} |"
         )
-    (args.out / "study.md").write_text("\n".join(lines) + "\n")
-    (args.out / "study.json").write_text(json.dumps(rows, indent=2) + "\n")
+    (folder / "study.md").write_text("\n".join(lines) + "\n")
+    (folder / "study.json").write_text(json.dumps(rows, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """The standing reliability benchmark: every MPC agent over a seeded family of random scenes.
 
-    python -m benchmarks.stress                          # 200 scenes x rmpc, smpc0, smpc1000
-    python -m benchmarks.stress --scenes 20 --agents rmpc --out /tmp/stress
+    python -m benchmarks.stress            # 200 scenes x rmpc, smpc:paper:0, smpc:paper:1000
+    python -m benchmarks.stress --scenes 20 --agents rmpc --out results/stress20
 
 The scenes (:mod:`benchmarks.scenes`): starts near the path; objects close by, crossing the path,
 or never crossing it; every uncertainty level of Table I and an enlarged growth; v_ref from 1 to
@@ -12,8 +12,10 @@ the MPC acted (``"soft"``: the risk rows softened; ``"manoeuvre"``: the safest r
 manoeuvre), as a share of all steps; solver calls that failed; and the step time (the whole
 ``predict``) at p50 / p95 / p99 / max.
 
-Writes ``stress.csv`` (one row per agent and scene), ``stress_summary.csv`` and ``stress.md``
-(the command that made them in its header) to ``--out``.
+Agents are named as in every command (:mod:`benchmarks.agent_names`); an SMPC without a tolerance
+runs at epsilon = 0 in the paper's severity (J). Writes ``stress.csv`` (one row per agent and
+scene), ``stress_summary.csv`` and ``stress.md`` (the command that made them in its header) to
+``--out``, as one output set (:mod:`benchmarks.output`; ``--resume`` goes on after an interruption).
 """
 
 from __future__ import annotations
@@ -22,8 +24,6 @@ import argparse
 import csv
 import gc
 import os
-import shlex
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,17 +32,21 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
+from benchmarks.agent_names import AgentName, parse_agent
 from benchmarks.scenes import Scene, infeasible_step, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import default_workers, run_sweep
 
-AGENTS: dict[str, tuple[str, str, float]] = {
-    "rmpc": ("RMPC", "worst_case", 0.0),
-    "smpc0": ("SMPC", "exact", 0.0),
-    "smpc1000": ("SMPC", "exact", 1000.0),
-    "smpc_mc1000": ("SMPC", "monte_carlo", 1000.0),
-}
-"""Agent names -> (method, risk estimator, epsilon [J])."""
-DEFAULT_AGENTS = ("rmpc", "smpc0", "smpc1000")
+DEFAULT_AGENTS = ("rmpc:worst_case", "smpc:exact:paper:0", "smpc:exact:paper:1000")
+"""The agents of the standing benchmark (``smpc:monte_carlo:paper:1000`` too in the committed run)."""
+FILES = ("stress.csv", "stress_summary.csv", "stress.md")
+"""The files a run writes in ``--out``."""
+
+
+def agent(name: str) -> AgentName:
+    """The agent ``name`` (an SMPC without a tolerance: epsilon = 0, the paper's severity)."""
+    return parse_agent(name, ("rmpc", "smpc")).with_defaults("paper", 0.0)
+
+
 EPISODE_COLUMNS = (
     "agent",
     "scene",
@@ -108,14 +112,17 @@ def run_job(job: Job) -> dict[str, Any]:
     import gymnasium as gym
 
     import risk_env  # noqa: F401  (registers the env)
-    from benchmarks.rollout import build_agent, rollout
+    from benchmarks.rollout import build, rollout
 
-    method, risk, epsilon = AGENTS[job.agent]
+    name = agent(job.agent)
+    epsilon = name.tolerance or 0.0
     scene = job.scene
-    env = gym.make("RiskCrossing-v0", **scene.env_kwargs(epsilon))
-    agent = build_agent(method, risk, env, seed=scene.index, **dict(job.options))
+    kwargs = scene.env_kwargs(epsilon)
+    kwargs["scenario"] = kwargs["scenario"].replace(severity=name.severity or "paper")
+    env = gym.make("RiskCrossing-v0", **kwargs)
+    agent_ = build(name, env, seed=scene.index, **dict(job.options))
     gc.collect()  # the previous episode's agent (its reports hold it in a cycle) goes here, not in a step
-    record = rollout(agent, env, seed=scene.seed)
+    record = rollout(agent_, env, seed=scene.seed)
     env.close()
     truth = object_truth(scene)
     steps = record.steps
@@ -141,10 +148,10 @@ def run_job(job: Job) -> dict[str, Any]:
         "fallback_soft": record.fallbacks("soft"),
         "fallback_manoeuvre": record.fallbacks("manoeuvre"),
         "penalty_steps": int(sum(r.fallback is None and r.variant.endswith("_soft") for r in reports)),
-        "infeasible_steps": infeasible_steps(scene, record, epsilon, agent) if epsilon == 0.0 else "",
+        "infeasible_steps": infeasible_steps(scene, record, epsilon, agent_) if epsilon == 0.0 else "",
         "failed_calls": int(sum(getattr(r, "failed_calls", int(r.failed)) for r in reports)),
         "overran_calls": int(sum(getattr(r, "overran_calls", 0) for r in reports)),
-        "over_cap_steps": int(np.sum(record.solve_time > agent.max_solve_time)),
+        "over_cap_steps": int(np.sum(record.solve_time > agent_.max_solve_time)),
         "capped_steps": int(sum(bool(getattr(r, "capped", False)) for r in reports)),
         "solve_ms_p50": round(float(np.median(ms)), 3),
         "solve_ms_max": round(float(ms.max()), 3),
@@ -235,16 +242,17 @@ def markdown(
         "ran).",
         "Violation: median over the soft steps of max_n s_n [m of clearance for these agents].",
         "",
-        "| agent | method | eps [J] | scenes | steps | collisions (avoidable / unavoidable) |"
+        "| agent | method | eps | scenes | steps | collisions (avoidable / unavoidable) |"
         " fallback % (soft / manoeuvre) | infeasible % | not certified % | penalty | failed calls |"
         " overran | capped | > cap | p50 | p95 | p99 | max [ms] | CPU max [ms] | violation |",
         "|" + " --- |" * 20,
     ]
     lines.insert(-2, "<!-- --8<-- [start:summary] -->")
     for s in summary:
-        method, risk, eps = AGENTS[s["agent"]]
+        name = agent(s["agent"])
+        eps = "-" if name.tolerance is None else f"{name.tolerance:g}"
         lines.append(
-            f"| {s['agent']} | {method} {risk} | {eps:g} | {s['scenes']} | {s['steps']} | "
+            f"| {s['agent']} | {name.method} {name.variant} | {eps} | {s['scenes']} | {s['steps']} | "
             f"{s['collisions']} ({s['avoidable']} / {s['unavoidable']}) | "
             f"{s['fallback_pct']:.2f} ({s['soft_pct']:.2f} / {s['manoeuvre_pct']:.2f}) | "
             f"{'-' if s['infeasible_pct'] == '' else format(s['infeasible_pct'], '.2f')} | "
@@ -278,48 +286,40 @@ def markdown(
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.stress`` (defaults shown in ``--help``)."""
     p = cli.parser("stress", __doc__)
-    p.add_argument("--scenes", type=int, default=200, help="number of random scenes per agent")
-    p.add_argument("--seed", type=int, default=0, help="seed of the scene family")
+    p.add_argument("--scenes", type=cli.positive_int, default=200, help="number of random scenes per agent")
+    p.add_argument("--seed", type=cli.nonnegative_int, default=0, help="seed of the scene family")
     p.add_argument(
         "--agents",
+        type=cli.agents_list(("rmpc", "smpc")),
         default=",".join(DEFAULT_AGENTS),
-        help=f"comma list from {', '.join(AGENTS)} (smpc_mc1000: Monte Carlo, slow)",
+        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]"
+        " (smpc:monte_carlo: slow)",
     )
     p.add_argument(
         "--max-solve-time",
-        type=float,
+        type=cli.time_cap,
         default=None,
         help="wall-time cap of one MPC step [s] (default: the agents' own, 20%% of the sample time)",
     )
     p.add_argument("--solver", default=None, choices=("fatrop", "ipopt"), help="NLP solver (default: fatrop)")
-    p.add_argument(
-        "--out",
-        type=Path,
-        default=Path("results"),
-        help="output folder (the committed run is in docs/results/stress/)",
+    cli.add_output_options(
+        p, Path("results"), "output folder (the committed run is in docs/results/stress/)", resume=True
     )
     cli.add_sweep_options(p)
     return p
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = build_parser()
+def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None = None) -> argparse.Namespace:
+    p = p or build_parser()
     args = p.parse_args(argv)
-    args.agents = cli.comma_list(args.agents)
-    if bad := [a for a in args.agents if a not in AGENTS]:
-        p.error(f"unknown agent(s) {bad}; expected from {list(AGENTS)}")
-    if args.scenes < 1:
-        p.error(f"--scenes must be >= 1, got {args.scenes}")
-    if args.max_solve_time is not None and not args.max_solve_time > 0:
-        p.error(f"--max-solve-time must be > 0, got {args.max_solve_time}")
+    args.agents = [str(agent(str(a))) for a in args.agents]
     return args
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    args = parse_args(argv)
-    command = "python -m benchmarks.stress " + " ".join(
-        shlex.quote(a) for a in (sys.argv[1:] if argv is None else argv)
-    )
+    p = build_parser()
+    args = parse_args(argv, p)
+    out = cli.open_output(p, args, "stress", FILES, argv)
     options: dict[str, Any] = {}
     if args.max_solve_time is not None:
         options["max_solve_time"] = args.max_solve_time
@@ -327,27 +327,25 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         options["solver"] = args.solver
     scenes = make_scenes(args.scenes, args.seed)
     jobs = [Job(a, s, tuple(sorted(options.items()))) for a in args.agents for s in scenes]
-    t0 = time.perf_counter()
-    rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="stress episodes")
-    wall = time.perf_counter() - t0
-    summary = [summarise(a, [r for r in rows if r["agent"] == a]) for a in args.agents]
-    args.out.mkdir(parents=True, exist_ok=True)
-    for name, columns, table in (
-        ("stress.csv", EPISODE_COLUMNS, rows),
-        ("stress_summary.csv", SUMMARY_COLUMNS, summary),
-    ):
-        with (args.out / name).open("w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-            writer.writeheader()
-            writer.writerows(table)
-    workers = args.workers or default_workers()
-    where = "a Ray cluster" if args.ray is not False else f"{workers} worker process(es)"
-    text = markdown(summary, rows, command.strip(), wall, where)
-    (args.out / "stress.md").write_text(text)
+    with out:
+        t0 = time.perf_counter()
+        rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="stress episodes", store=out.store)
+        wall = time.perf_counter() - t0
+        summary = [summarise(a, [r for r in rows if r["agent"] == a]) for a in args.agents]
+        for name, columns, table in (
+            ("stress.csv", EPISODE_COLUMNS, rows),
+            ("stress_summary.csv", SUMMARY_COLUMNS, summary),
+        ):
+            with (out.dir / name).open("w", newline="") as f:
+                writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
+                writer.writeheader()
+                writer.writerows(table)
+        workers = args.workers or default_workers()
+        where = "a Ray cluster" if args.ray is not False else f"{workers} worker process(es)"
+        text = markdown(summary, rows, out.command_line.strip(), wall, where)
+        (out.dir / "stress.md").write_text(text)
     print(text)
-    print(
-        "Wrote:\n" + "\n".join(f"  {args.out / n}" for n in ("stress.csv", "stress_summary.csv", "stress.md"))
-    )
+    print("Wrote:\n" + "\n".join(f"  {args.out / n}" for n in FILES))
     return summary
 
 

@@ -1,10 +1,11 @@
 """The terminal summary of ``python -m benchmarks.table2``: one screen, every failure explained.
 
-The full tables go to ``table2.md``; the terminal gets what a reader needs first: per agent the
-runs, collisions, failed solves and ranges of the results, then the paper's claims. Each claim
-that does not hold gets one line of why, computed from the runs, and the docs page that explains
-it (:data:`DOCS`). Rows that look like a bug but are not (PPO rows that never change, the grid
-RMPC's failed solves) are explained too.
+The full tables go to ``table2.md``; the terminal gets what a reader needs first: what each
+column means (:data:`COLUMNS`), per agent the runs, collisions, failed solver steps and ranges of
+the results, then the paper's claims, numbered and counted as listed. Each claim that does not
+hold gets one line of why, computed from the runs, and the docs page that explains it
+(:data:`DOCS`). Rows that look like a bug but are not (PPO rows that never change, the grid
+RMPC's failed solver steps) are explained too.
 """
 
 from __future__ import annotations
@@ -16,6 +17,12 @@ from typing import Any
 
 DOCS = "docs/reproduction.md"
 """The docs page (in the repository) that explains the reproduction and its deviations."""
+COLUMNS = (
+    "e_acc: the accumulated path error, the sum over the run's steps of ||e_k|| (lower: nearer path)",
+    "d_min: the smallest centre distance to an object over the run [m] (a collision below r_e + r_o)",
+    "failed solver steps: steps where the MPC's solver found no plan and a fallback level acted",
+)
+"""One line per column of the agent table that needs a definition."""
 ANCHORS = {
     "grid": "#the-grid-rmpcs-failed-solves",
     "monotone": "#d_min-and-epsilon",
@@ -39,7 +46,8 @@ _SEVERITY_WHY = {
 
 
 def _label(method: str, variant: str) -> str:
-    return f"{method} {variant}"
+    """The agent's name (:mod:`benchmarks.agent_names`)."""
+    return f"{method.lower()}:{variant}"
 
 
 def _range(values: list[float]) -> str:
@@ -52,19 +60,19 @@ def _wrap(text: str, indent: str) -> list[str]:
 
 
 def agent_table(rows: list[dict[str, Any]]) -> list[str]:
-    """One line per agent: runs, collisions, failed solves, e_acc and d_min ranges, solve p95."""
+    """One line per agent: runs, collisions, failed solver steps, e_acc and d_min ranges, solve p95."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["method"], r["risk_method"]), []).append(r)
     lines = [
-        f"{'agent':<18}{'runs':>5}{'collided':>10}{'failed solves':>15}"
-        f"{'e_acc':>14}{'d_min [m]':>12}{'solve p95 [ms]':>16}"
+        f"{'agent':<18}{'runs':>5}{'collided':>9}{'failed solver steps':>21}"
+        f"{'e_acc':>13}{'d_min [m]':>11}{'solve p95 [ms]':>16}"
     ]
     for (method, variant), sel in groups.items():
         lines.append(
-            f"{_label(method, variant):<18}{len(sel):>5}{sum(bool(r['collided']) for r in sel):>10}"
-            f"{sum(int(r['failed_solves']) for r in sel):>15}{_range([r['e_acc'] for r in sel]):>14}"
-            f"{_range([r['d_min'] for r in sel]):>12}{max(r['solve_ms_p95'] for r in sel):>16.1f}"
+            f"{_label(method, variant):<18}{len(sel):>5}{sum(bool(r['collided']) for r in sel):>9}"
+            f"{sum(int(r['failed_solves']) for r in sel):>21}{_range([r['e_acc'] for r in sel]):>13}"
+            f"{_range([r['d_min'] for r in sel]):>11}{max(r['solve_ms_p95'] for r in sel):>16.1f}"
         )
     return lines
 
@@ -101,7 +109,7 @@ def why(claims: list[str], rows: list[dict[str, Any]]) -> str:
     """One sentence of why ``claims`` (variants of one claim) do not hold, from the runs, with the
     docs section that explains it."""
     index = {(r["method"], r["risk_method"], r["uncertainty"], r["epsilon"]): r for r in rows}
-    pattern = r"SMPC \(([a-z_]+)\) below RMPC \(([a-z_]+)\)"
+    pattern = r"SMPC \(([a-z_]+)\) at or below RMPC \(([a-z_]+)\)"
     below = [m.groups() for c in claims if (m := re.match(pattern, c))]
     if below:
         rmpc = below[0][1]
@@ -112,21 +120,21 @@ def why(claims: list[str], rows: list[dict[str, Any]]) -> str:
                 if (method, variant) == ("SMPC", smpc) and r is not None:
                     if not (s["e_acc"] <= r["e_acc"] and s["d_min"] <= r["d_min"]):
                         cases.setdefault((level, eps), []).append(
-                            f"{smpc} {s['e_acc']:.1f}/{s['d_min']:.1f} m"
+                            f"smpc:{smpc} e_acc {s['e_acc']:.1f}, d_min {s['d_min']:.1f} m"
                         )
         parts = []
         for (level, eps), found in list(cases.items())[:2]:
             r = index[("RMPC", rmpc, level, eps)]
             parts.append(
-                f"{level}/{eps:g}{_unit(rows)}: SMPC {', '.join(found)}, {rmpc} RMPC"
-                f" {r['e_acc']:.1f}/{r['d_min']:.1f} m"
+                f"{level} uncertainty, epsilon {eps:g}{_unit(rows)}: {'; '.join(found)};"
+                f" rmpc:{rmpc} e_acc {r['e_acc']:.1f}, d_min {r['d_min']:.1f} m"
             )
         failed = sum(
             int(r["failed_solves"]) for r in rows if (r["method"], r["risk_method"]) == ("RMPC", rmpc)
         )
-        stall = f" (its solver stalls: {failed} failed solves)" if rmpc == "grid" and failed else ""
+        stall = f" (its solver stalls: {failed} failed solver steps)" if rmpc == "grid" and failed else ""
         return (
-            f"{'; '.join(parts)} (e_acc/d_min): at epsilon = 0 the SMPC keeps clear of the whole"
+            f"{' | '.join(parts)}. At epsilon = 0 the SMPC keeps clear of the whole"
             f" truncation box, like the exact worst case; the {rmpc} RMPC keeps less{stall}."
             f" {DOCS}{ANCHORS['claims']}"
         )
@@ -195,7 +203,7 @@ def notes(rows: list[dict[str, Any]]) -> list[str]:
                 reason = "a warm start did not converge"
                 where = FALLBACK_DOCS
             out += _wrap(
-                f"{_label(method, variant)}: {failed} failed solves ({', '.join(levels)}), soft problem"
+                f"{_label(method, variant)}: {failed} failed solver steps ({', '.join(levels)}), soft problem"
                 f" or manoeuvre ({reason}). {where}",
                 "  ",
             )
@@ -205,7 +213,7 @@ def notes(rows: list[dict[str, Any]]) -> list[str]:
     if constant:
         names = " and ".join(v for v, _ in constant)
         out += _wrap(
-            f"PPO {names}: each the same in all {constant[0][1]} configurations: the policy sees neither"
+            f"ppo:{names}: each the same in all {constant[0][1]} configurations: the policy sees neither"
             f" the uncertainty level nor epsilon, and the object moves alike in all. {DOCS}{ANCHORS['ppo']}",
             "  ",
         )
@@ -219,7 +227,7 @@ def summary(
     report: Path,
     written: list[Path],
 ) -> str:
-    """The terminal report of a Table II run (at most 34 lines); ``report`` is the full markdown,
+    """The terminal report of a Table II run (at most 36 lines); ``report`` is the full markdown,
     ``written`` the other files."""
     agents = len({(r["method"], r["risk_method"]) for r in rows})
     levels = len({r["uncertainty"] for r in rows})
@@ -228,11 +236,17 @@ def summary(
         f"Table II: {len(rows)} closed loops ({agents} agents x {levels} uncertainty levels x"
         f" {tolerances} tolerances) in {sum(wall.values()):.0f} s.",
         *agent_table(rows),
-        f"The paper's claims: {sum(ok is True for _, ok, _ in claims)} of {len(claims)} hold.",
+        *COLUMNS,
     ]
-    for text, ok, members in grouped(claims):
+    listed = grouped(claims)
+    counts = [sum(ok is verdict for _, ok, _ in listed) for verdict in (True, False, None)]
+    lines.append(
+        f"The paper's claims, {len(listed)} as listed: {counts[0]} hold, {counts[1]} do not"
+        + (f", {counts[2]} not run." if counts[2] else ".")
+    )
+    for i, (text, ok, members) in enumerate(listed, 1):
         verdict = {True: "holds", False: "NO", None: "not run"}[ok]
-        lines += _wrap(f"{verdict:<6} {text}", "  ")
+        lines += _wrap(f"{i}. {verdict:<6} {text}", "  ")
         if ok is False:
             lines += _wrap("why: " + why(members, rows), "    ")
     extra = notes(rows)

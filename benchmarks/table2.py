@@ -2,19 +2,19 @@
 each risk method, and the shipped PPO policies on the same 36 configurations.
 
     python -m benchmarks.table2                      # every agent, written to results/
-    python -m benchmarks.table2 --methods rmpc:worst_case,smpc:exact --uncertainty low
+    python -m benchmarks.table2 --agents rmpc:worst_case,smpc:exact --uncertainty low --out results/low
     python -m benchmarks.table2 --scene two_crossing --out results/two_crossing
 
 Writes ``table2.csv`` (one row per run), ``table2.md`` (our figures beside the paper's, the claims
 checklist, timing), ``table2_runs.npz`` (every trajectory), ``table2_meta.json`` and the Fig. 3/4
-PNGs. The terminal gets a one-screen summary (:func:`summary`): runs, collisions and failed solves
+PNGs, as one output set (:mod:`benchmarks.output`: a manifest, nothing mixed with an earlier run).
+The terminal gets a one-screen summary (:func:`summary`): runs, collisions and failed solver steps
 per agent, and the paper's claims, with a reason for each one that does not hold.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import time
@@ -25,36 +25,37 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
+from benchmarks.claims import LEVELS, check_claims
+from benchmarks.output import jsonable
 from benchmarks.paper_table2 import PAPER, TOLERANCES
 from benchmarks.rollout import AGENTS, EpisodeRecord, available_agents, build_agent, rollout
 from benchmarks.summary import summary
 from benchmarks.sweep import run_sweep
+from benchmarks.table2_report import CSV_COLUMNS, markdown, write_csv
 from risk_env.scenario.scenario import SCENE_NAMES, SEVERITY_NAMES, Scenario
 
+__all__ = [
+    "CSV_COLUMNS",
+    "LEVELS",
+    "METHODS",
+    "RunSpec",
+    "check_claims",
+    "main",
+    "markdown",
+    "run_one",
+    "specs_for",
+]
 METHODS = AGENTS
-LEVELS = ("low", "medium", "high")
-CSV_COLUMNS = (
-    "method",
-    "risk_method",
-    "uncertainty",
-    "epsilon",
-    "severity",
-    "e_acc",
-    "d_min",
-    "collided",
-    "reached_goal",
-    "steps",
-    "failed_solves",
-    "solve_ms_median",
-    "solve_ms_p95",
-    "solve_ms_max",
-    "max_risk",
-    "wall_s",
-    "paper_e_acc",
-    "paper_d_min",
-    "fallback_soft",
-    "fallback_manoeuvre",
+FILES = (
+    "table2.csv",
+    "table2.md",
+    "table2_runs.npz",
+    "table2_meta.json",
+    "fig3_trajectories.png",
+    "fig4_velocities.png",
+    "table2_at_a_glance.png",
 )
+"""The files a run writes in ``--out`` (the figures unless ``--no-figures``)."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,7 @@ def run_one(spec: RunSpec) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         paper = PAPER.get((spec.method, spec.uncertainty, spec.epsilon), paper)
     solve_ms = 1e3 * record.solve_time
     row = {
+        "agent": f"{spec.method.lower()}:{spec.risk_method}",
         "method": spec.method,
         "risk_method": spec.risk_method,
         "uncertainty": spec.uncertainty,
@@ -153,190 +155,34 @@ def specs_for(
     ]
 
 
-# --- the paper's claims -------------------------------------------------------------------------
-
-
-def check_claims(rows: list[dict[str, Any]]) -> list[tuple[str, bool | None, str]]:
-    """Each claim of the paper's Sec. VIII as (claim, holds, evidence); None when not run."""
-    index = {(r["method"], r["risk_method"], r["uncertainty"], r["epsilon"]): r for r in rows}
-    claims: list[tuple[str, bool | None, str]] = []
-    rmpc_methods = sorted({r["risk_method"] for r in rows if r["method"] == "RMPC"})
-    smpc_methods = sorted({r["risk_method"] for r in rows if r["method"] == "SMPC"})
-    levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
-    for rm in rmpc_methods:
-        spreads = []
-        for lv in levels:
-            runs = [r for r in rows if (r["method"], r["risk_method"], r["uncertainty"]) == ("RMPC", rm, lv)]
-            if len(runs) > 1:
-                e = [r["e_acc"] for r in runs]
-                d = [r["d_min"] for r in runs]
-                spreads.append((lv, max(e) - min(e), max(d) - min(d), float(np.mean(e))))
-        if spreads:
-            # within 1 % of e_acc and 5 cm of d_min: the solver's tolerance, not a behaviour change
-            ok = all(de <= 0.01 * mean_e and dd <= 0.05 for _, de, dd, mean_e in spreads)
-            text = ", ".join(
-                f"{lv}: e_acc spread {de:.2f}, d_min spread {dd:.2f} m" for lv, de, dd, _ in spreads
-            )
-            claims.append((f"RMPC ({rm}) does not depend on epsilon", ok, text))
-        means = [
-            np.mean(
-                [
-                    r["d_min"]
-                    for r in rows
-                    if (r["method"], r["risk_method"], r["uncertainty"]) == ("RMPC", rm, lv)
-                ]
-            )
-            for lv in levels
-        ]
-        if len(means) > 1:
-            ok = bool(np.all(np.diff(means) > 0))
-            claims.append(
-                (
-                    f"RMPC ({rm}) d_min grows with uncertainty",
-                    ok,
-                    ", ".join(f"{lv} {m:.2f} m" for lv, m in zip(levels, means)),
-                )
-            )
-    for rm in rmpc_methods:
-        for sm in smpc_methods:
-            pairs = [
-                (index[("RMPC", rm, lv, eps)], index[("SMPC", sm, lv, eps)])
-                for (meth, risk, lv, eps) in index
-                if meth == "RMPC" and risk == rm and ("SMPC", sm, lv, eps) in index
-            ]
-            if pairs:
-                e_ok = sum(s["e_acc"] <= r["e_acc"] for r, s in pairs)
-                d_ok = sum(s["d_min"] <= r["d_min"] for r, s in pairs)
-                claims.append(
-                    (
-                        f"SMPC ({sm}) below RMPC ({rm}) in e_acc and d_min",
-                        e_ok == len(pairs) and d_ok == len(pairs),
-                        f"e_acc lower in {e_ok}/{len(pairs)} runs, d_min lower in {d_ok}/{len(pairs)}",
-                    )
-                )
-    for sm in smpc_methods:
-        parts, ok = [], True
-        for lv in levels:
-            runs = sorted(
-                (r for r in rows if (r["method"], r["risk_method"], r["uncertainty"]) == ("SMPC", sm, lv)),
-                key=lambda r: r["epsilon"],
-            )
-            if len(runs) > 1:
-                d = [r["d_min"] for r in runs]
-                falls = bool(np.all(np.diff(d) <= 0.05)) and d[-1] < d[0] - 0.05
-                ok &= falls
-                parts.append(f"{lv}: " + " > ".join(f"{x:.2f}" for x in d))
-        if parts:
-            claims.append((f"SMPC ({sm}) d_min falls as epsilon grows", ok, "; ".join(parts)))
-    collided = [
-        f"{r['method']}/{r['risk_method']}/{r['uncertainty']}/{r['epsilon']:g}" for r in rows if r["collided"]
-    ]
-    claims.append(("No run collides", not collided, ", ".join(collided) or f"0 of {len(rows)} runs"))
-    return claims
-
-
-# --- reports ------------------------------------------------------------------------------------
-
-
-def markdown(
-    rows: list[dict[str, Any]],
-    claims: list[tuple[str, bool | None, str]],
-    wall: dict[str, float],
-    scene: str = "paper",
-) -> str:
-    lines = ["# Table II: ours beside the paper's", ""]
-    if scene != "paper":
-        lines += [
-            f"Scene `{scene}` (risk_env.scenario.scenes): the paper's figures are for its one-object scene.",
-            "",
-        ]
-    lines.append("Each cell: ours (paper). e_acc = sum of ||e_k||; d_min [m]. `*` marks a collision.")
-    units = sorted({_unit(r.get("severity", "paper")) for r in rows})
-    lines.append(f"eps in the severity's unit: {', '.join(units)}.")
-    order = {"RMPC": 0, "SMPC": 1, "PPO": 2}  # the paper's two, then the learned baseline
-    groups = sorted({(r["method"], r["risk_method"]) for r in rows}, key=lambda g: (order[g[0]], g[1]))
-    levels = [lv for lv in LEVELS if any(r["uncertainty"] == lv for r in rows)]
-    for method, risk in groups:
-        kind = "training" if method == "PPO" else "risk"
-        section = f"{method.lower()}-{risk}"  # a pymdownx.snippets section, for the docs
-        lines += ["", f"## {method}, {kind}: {risk}", "", f"<!-- --8<-- [start:{section}] -->"]
-        header = "| eps | " + " | ".join(f"{lv} e_acc | {lv} d_min" for lv in levels) + " |"
-        lines += [header, "|" + " --- |" * (1 + 2 * len(levels))]
-        for eps in sorted({r["epsilon"] for r in rows}):
-            cells = []
-            for lv in levels:
-                match = [
-                    r
-                    for r in rows
-                    if (r["method"], r["risk_method"], r["uncertainty"], r["epsilon"])
-                    == (method, risk, lv, eps)
-                ]
-                if not match:
-                    cells += ["", ""]
-                    continue
-                r = match[0]
-                star = "*" if r["collided"] else ""
-                cells.append(f"{r['e_acc']:.1f}{star} ({_fmt(r['paper_e_acc'])})")
-                cells.append(f"{r['d_min']:.1f}{star} ({_fmt(r['paper_d_min'])})")
-            lines.append(f"| {eps:g} | " + " | ".join(cells) + " |")
-        lines.append(f"<!-- --8<-- [end:{section}] -->")
-    lines += ["", "## The paper's claims", "", "<!-- --8<-- [start:claims] -->"]
-    for claim, ok, evidence in claims:
-        verdict = "holds" if ok else ("not run" if ok is None else "**does not hold**")
-        lines.append(f"- {claim}: {verdict} ({evidence})")
-    lines += ["<!-- --8<-- [end:claims] -->", "", "## Timing", "", "<!-- --8<-- [start:timing] -->"]
-    lines.append(
-        "| method | risk | runs | wall [s] | solve median [ms] | solve p95 [ms] | solve max [ms] |"
-        " fallbacks (soft / manoeuvre) |"
-    )
-    lines.append("| --- | --- | --- | --- | --- | --- | --- | --- |")
-    for method, risk in groups:
-        sel = [r for r in rows if (r["method"], r["risk_method"]) == (method, risk)]
-        lines.append(
-            f"| {method} | {risk} | {len(sel)} | {wall.get(f'{method}:{risk}', float('nan')):.1f} | "
-            f"{np.median([r['solve_ms_median'] for r in sel]):.1f} | "
-            f"{max(r['solve_ms_p95'] for r in sel):.1f} | "
-            f"{max(r['solve_ms_max'] for r in sel):.1f} | {sum(r['failed_solves'] for r in sel)}"
-            f" ({sum(r['fallback_soft'] for r in sel)} / {sum(r['fallback_manoeuvre'] for r in sel)}) |"
-        )
-    lines.append("<!-- --8<-- [end:timing] -->")
-    return "\n".join(lines) + "\n"
-
-
-def _unit(severity: str) -> str:
-    """The unit of the severity named ``severity`` (J, probability, injuries)."""
-    from risk_env.risk.severity import make_severity
-
-    return make_severity(Scenario(severity=severity)).unit
-
-
-def _fmt(x: float) -> str:
-    return "-" if x != x else f"{x:.1f}"
-
-
-def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.table2``."""
     p = cli.parser("table2", __doc__)
+    agents = cli.agents_list(("rmpc", "smpc", "ppo"), tolerance=False, budget=False)
     p.add_argument(
-        "--methods",
+        "--agents",
+        type=agents,
         default=None,
         help=f"comma list of agents, from {', '.join(METHODS)} (default: all; PPO needs the rl extra)",
     )
-    p.add_argument("--uncertainty", default="low,medium,high", help="comma list of Table I levels")
+    p.add_argument("--methods", type=agents, dest="agents", action=cli.Renamed, new="--agents")
     p.add_argument(
-        "--tolerances",
-        default=",".join(f"{t:g}" for t in TOLERANCES),
-        help="comma list of epsilon in the severity's unit (default: the paper's, in J)",
+        "--uncertainty",
+        type=cli.choices_list(LEVELS, "uncertainty"),
+        default="low,medium,high",
+        help="comma list of Table I levels",
     )
     p.add_argument(
-        "--v-ref", type=float, default=None, help="reference speed [m/s] (default: the Scenario's, 4)"
+        "--tolerances",
+        type=cli.numbers_list(cli.nonnegative_float),
+        default=",".join(f"{t:g}" for t in TOLERANCES),
+        help="comma list of epsilon in the severity's unit (the default: the paper's, in J)",
+    )
+    p.add_argument(
+        "--v-ref",
+        type=cli.positive_float,
+        default=None,
+        help="reference speed [m/s] (default: the Scenario's, 4)",
     )
     p.add_argument(
         "--severity",
@@ -345,93 +191,81 @@ def build_parser() -> argparse.ArgumentParser:
         help="severity model (default: the Scenario's, paper); a severity other than paper needs"
         " --tolerances in its own unit",
     )
-    p.add_argument(
-        "--out",
-        type=Path,
-        default=Path("results"),
-        help="output folder; the committed results are rebuilt with --out docs/results",
+    cli.add_output_options(
+        p,
+        Path("results"),
+        "output folder; the committed results are rebuilt with --out docs/results",
+        resume=True,
     )
     p.add_argument(
         "--scene",
         default="paper",
         choices=SCENE_NAMES,
-        help="which road users cross (risk_env.scenario.scenes; default: the paper's one object)",
+        help="which road users cross (risk_env.scenario.scenes)",
     )
     cli.add_sweep_options(p)
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     return p
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = build_parser()
+def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None = None) -> argparse.Namespace:
+    p = p or build_parser()
     args = p.parse_args(argv)
-    if args.methods is None:
-        args.methods = available_agents(args.scene)
-        if not any(METHODS[m][0] == "PPO" for m in args.methods):
+    if args.agents is None:
+        args.agents = available_agents(args.scene)
+        if not any(METHODS[m][0] == "PPO" for m in args.agents):
             print("PPO rows skipped: pip install 'riskcrossing[rl]' to score the shipped PPO policies")
     else:
-        args.methods = cli.comma_list(args.methods)
-    unknown = [m for m in args.methods if m not in METHODS]
-    if unknown:
-        p.error(f"unknown method(s) {unknown}; expected from {list(METHODS)}")
-    args.uncertainty = cli.comma_list(args.uncertainty)
-    bad = [u for u in args.uncertainty if u not in LEVELS]
-    if bad:
-        p.error(f"unknown uncertainty {bad}; expected from {list(LEVELS)}")
-    try:
-        args.tolerances = [float(t) for t in cli.comma_list(args.tolerances)]
-    except ValueError:
-        p.error(f"--tolerances must be numbers, got {args.tolerances!r}")
-    if any(t < 0 for t in args.tolerances):
-        p.error("--tolerances must be >= 0")
+        args.agents = [str(a) for a in args.agents]
+    from benchmarks.rollout import SCENE_AGENTS
+
+    if bad := [a for a in args.agents if SCENE_AGENTS.get(a, args.scene) != args.scene]:
+        p.error(f"argument --agents: {', '.join(bad)} runs in --scene {SCENE_AGENTS[bad[0]]} only")
     from risk_env.risk.severity import check_tolerance
 
     try:
         for t in args.tolerances:
-            check_tolerance(t, args.severity or "paper", "--tolerances value")
+            check_tolerance(t, args.severity or "paper", "argument --tolerances: value")
     except ValueError as error:
         p.error(str(error))
     return args
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
-    args = parse_args(argv)
+    p = build_parser()
+    args = parse_args(argv, p)
+    out = cli.open_output(p, args, "table2", FILES, argv)
     overrides: dict[str, Any] = {}
     if args.v_ref is not None:
         overrides["v_ref"] = args.v_ref
     if args.severity is not None:
         overrides["severity"] = args.severity
-    args.out.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
     arrays: dict[str, np.ndarray] = {}
     wall: dict[str, float] = {}
-    for method in args.methods:
-        specs = specs_for([method], args.uncertainty, args.tolerances, overrides, scene=args.scene)
-        t0 = time.perf_counter()
-        results = run_sweep(run_one, specs, args.workers, args.ray, desc=method)
-        wall[":".join(METHODS[method])] = time.perf_counter() - t0
-        for spec, (row, arr) in zip(specs, results):
-            rows.append(row)
-            for key, value in arr.items():
-                arrays[f"{spec.label}/{key}"] = value
-        write_csv(rows, args.out / "table2.csv")  # keep what is done if a later method fails
-    claims = check_claims(rows)
-    (args.out / "table2.md").write_text(markdown(rows, claims, wall, args.scene))
-    np.savez_compressed(args.out / "table2_runs.npz", **arrays)
-    (args.out / "table2_meta.json").write_text(
-        json.dumps({"wall_s": wall, "args": _jsonable(vars(args))}, indent=2)
-    )
-    written = [args.out / "table2.csv", args.out / "table2_runs.npz", args.out / "table2_meta.json"]
-    if not args.no_figures:
-        from benchmarks.figures import paper_figures
+    with out:
+        for method in args.agents:
+            specs = specs_for([method], args.uncertainty, args.tolerances, overrides, scene=args.scene)
+            t0 = time.perf_counter()
+            results = run_sweep(run_one, specs, args.workers, args.ray, desc=method, store=out.store)
+            wall[":".join(METHODS[method])] = time.perf_counter() - t0
+            for spec, (row, arr) in zip(specs, results):
+                rows.append(row)
+                for key, value in arr.items():
+                    arrays[f"{spec.label}/{key}"] = value
+        claims = check_claims(rows)
+        write_csv(rows, out.dir / "table2.csv")
+        (out.dir / "table2.md").write_text(markdown(rows, claims, wall, args.scene))
+        np.savez_compressed(out.dir / "table2_runs.npz", **arrays)
+        meta = {"wall_s": wall, "args": vars(args)}
+        (out.dir / "table2_meta.json").write_text(json.dumps(jsonable(meta), indent=2))
+        if not args.no_figures:
+            from benchmarks.figures import paper_figures
 
-        written += paper_figures(rows, arrays, args.out, Scenario.preset(scene=args.scene))
-    print(summary(rows, claims, wall, args.out / "table2.md", written))
+            paper_figures(rows, arrays, out.dir, Scenario.preset(scene=args.scene))
+        written = [args.out / name for name in out.written()]
+    print(summary(rows, claims, wall, args.out / "table2.md", [p for p in written if p.name != "table2.md"]))
     return rows
-
-
-def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: (str(v) if isinstance(v, Path) else v) for k, v in d.items()}
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """How fast and how reliable are the MPC agents? The paper's closed loop, solve by solve.
 
     python -m benchmarks.timing --out docs/results/timing.txt
-    python -m benchmarks.timing --agents smpc_exact --jit --out docs/results/timing_jit.txt
+    python -m benchmarks.timing --agents smpc:exact --jit --out docs/results/timing_jit.txt
 
 Each agent drives ``RiskCrossing-v0`` (ego and the deterministic object of the paper) for every
 uncertainty level and risk tolerance, up to ``--steps`` steps (an episode also ends at a collision
@@ -20,7 +20,9 @@ uncertainty level
 and tolerance, paid once per machine (the libraries are kept in ``$RISKMPC_JIT_CACHE``, default
 ``~/.cache/riskcrossing/jit``); the "build" time printed is what this run spent building and
 compiling. The Monte Carlo SMPC's code (500 draws per step) would take many minutes to compile and
-meets its target without. Timings on a shared machine are noisy: run it alone.
+meets its target without. Timings on a shared machine are noisy: run it alone. Agents are named as
+in every command (:mod:`benchmarks.agent_names`); ``--out FILE`` writes the report and its
+manifest ``FILE-STEM.manifest.json`` beside it (:mod:`benchmarks.output`).
 """
 
 from __future__ import annotations
@@ -42,15 +44,16 @@ from benchmarks.rollout import rollout
 from risk_env import RISK_TOLERANCES, UNCERTAINTY_PRESETS, Scenario
 
 AGENTS: dict[str, tuple[str, Callable[..., PathFollowingMPC]]] = {
-    "rmpc": ("RMPC, worst case (box)", lambda sc, **kw: RMPC(sc, **kw)),
-    "rmpc_grid": ("RMPC, L-point grid", lambda sc, **kw: RMPC(sc, risk="grid", **kw)),
-    "smpc_exact": ("SMPC, exact risk", lambda sc, **kw: SMPC(sc, **kw)),
-    "smpc_mc": (
+    "rmpc:worst_case": ("RMPC, worst case (box)", lambda sc, **kw: RMPC(sc, **kw)),
+    "rmpc:grid": ("RMPC, L-point grid", lambda sc, **kw: RMPC(sc, risk="grid", **kw)),
+    "smpc:exact": ("SMPC, exact risk", lambda sc, **kw: SMPC(sc, **kw)),
+    "smpc:monte_carlo": (
         "SMPC, Monte Carlo",
         lambda sc, samples=None, **kw: SMPC(sc, risk="monte_carlo", samples=samples, **kw),
     ),
 }
-TARGETS_MS = {"rmpc": (5.0, 15.0), "smpc_exact": (5.0, 15.0), "smpc_mc": (40.0, 80.0)}
+"""Every agent timed (:mod:`benchmarks.agent_names`) -> (description, its constructor)."""
+TARGETS_MS = {"rmpc:worst_case": (5.0, 15.0), "smpc:exact": (5.0, 15.0), "smpc:monte_carlo": (40.0, 80.0)}
 """(median, p95) solve-time targets per step [ms]."""
 
 
@@ -128,37 +131,50 @@ def summarise(name: str, episodes: list[Episode], build_time: float, dt: float) 
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.timing``."""
     parser = cli.parser("timing", __doc__)
-    parser.add_argument("--steps", type=int, default=40, help="step limit per episode")
+    parser.add_argument("--steps", type=cli.positive_int, default=40, help="step limit per episode")
     parser.add_argument(
         "--agents",
-        default="rmpc,smpc_exact,smpc_mc,rmpc_grid",
+        type=cli.agents_list(("rmpc", "smpc"), tolerance=False, budget=False),
+        default="rmpc:worst_case,smpc:exact,smpc:monte_carlo,rmpc:grid",
         help=f"comma list, from {', '.join(AGENTS)}",
     )
-    parser.add_argument("--uncertainty", default="low,medium,high", help="comma list of Table I levels")
+    parser.add_argument(
+        "--uncertainty",
+        type=cli.choices_list(UNCERTAINTY_PRESETS, "uncertainty"),
+        default="low,medium,high",
+        help="comma list of Table I levels",
+    )
     parser.add_argument(
         "--tolerances",
+        type=cli.numbers_list(cli.nonnegative_float),
         default=",".join(f"{e:g}" for e in RISK_TOLERANCES),
         help="comma list of risk tolerances epsilon [J]",
     )
     parser.add_argument("--solver", default="fatrop", choices=("fatrop", "ipopt"), help="NLP solver")
     parser.add_argument(
-        "--samples", type=int, default=None, help="Monte Carlo draws J (default: the Scenario's, 500)"
+        "--samples",
+        type=cli.positive_int,
+        default=None,
+        help="Monte Carlo draws J (default: the Scenario's, 500)",
     )
     parser.add_argument(
         "--jit", action="store_true", help="run the solvers on compiled C (the first build compiles ~40 s)"
     )
     parser.add_argument(
-        "--max-iter", type=int, default=None, help="solver iteration limit per call (default: the agent's)"
+        "--max-iter",
+        type=cli.positive_int,
+        default=None,
+        help="solver iteration limit per call (default: the agent's)",
     )
     parser.add_argument(
         "--cold-starts",
-        type=int,
+        type=cli.nonnegative_int,
         default=None,
         help="cold starts after a failed warm one (default: the agent's)",
     )
     parser.add_argument(
         "--max-solve-time",
-        type=float,
+        type=cli.time_cap,
         default=None,
         help="wall-time cap of a step [s] (default: the agents' own, 20%% of T; inf: none)",
     )
@@ -169,23 +185,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write the report to this file (default: print only; the committed reports are"
         " docs/results/timing.txt and timing_jit.txt)",
     )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace a report of another configuration at --out"
+    )
     return parser
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = build_parser()
     args = parser.parse_args(argv)
-
-    names = cli.comma_list(args.agents)
-    unknown = [a for a in names if a not in AGENTS]
-    if unknown:
-        parser.error(f"unknown agent(s) {unknown}; choose from {list(AGENTS)}")
-    levels = cli.comma_list(args.uncertainty)
-    if any(u not in UNCERTAINTY_PRESETS for u in levels):
-        parser.error(f"uncertainty must be among {UNCERTAINTY_PRESETS}, got {levels}")
-    tolerances = [float(t) for t in cli.comma_list(args.tolerances)]
-    if args.steps < 1:
-        parser.error(f"--steps must be >= 1, got {args.steps}")
+    names = [str(a) for a in args.agents]
+    levels, tolerances = args.uncertainty, args.tolerances
+    out = None
+    if args.out is not None:
+        if args.out.is_dir():
+            parser.error(
+                f"--out {args.out}: a folder; give the report's file name, e.g. {args.out / 'timing.txt'}"
+            )
+        out = cli.open_output(parser, args, args.out.stem, [args.out.name], argv, out=args.out.parent)
 
     options = {"solver": args.solver, "jit": args.jit}
     if args.max_iter is not None:
@@ -199,7 +216,7 @@ def main(argv: list[str] | None = None) -> None:
     with tqdm(total=total, desc="closed loops", unit="step") as progress:
         for name in names:
             make = AGENTS[name][1]
-            kwargs = dict(options, samples=args.samples) if name == "smpc_mc" else dict(options)
+            kwargs = dict(options, samples=args.samples) if name == "smpc:monte_carlo" else dict(options)
             episodes, build_time = [], 0.0
             for level in levels:
                 for epsilon in tolerances:
@@ -217,9 +234,9 @@ def main(argv: list[str] | None = None) -> None:
             report += summarise(name, episodes, build_time, Scenario().dt) + [""]
     text = "\n".join(report).rstrip()
     print(text)
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    if out is not None:
+        with out:
+            (out.dir / args.out.name).write_text(text + "\n")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
     python -m benchmarks.train_ppo --lagrangian --seeds 5 --out agents/models --name ppo_lagrangian
     python -m benchmarks.train_ppo --out agents/models --name ppo_penalty      # the shipped policies
-    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \
+    python -m benchmarks.train_ppo --lagrangian --scene two_crossing --total-timesteps 8000000 \\
         --checkpoint-every 0 --out agents/models --name ppo_lagrangian_two_crossing   # two objects
     python -m benchmarks.train_ppo --total-timesteps 8192 --no-progress-bar   # one rollout, to results/ppo
 
@@ -25,16 +25,43 @@ import ast
 import dataclasses
 import inspect
 import json
+import re
 import textwrap
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from benchmarks import cli
-from risk_env.scenario.scenes import SCENE_NAMES, scene_objects
+from benchmarks.ppo_setup import feature_spec, levels, make_callbacks, make_env, tolerances
+from risk_env.scenario.parts import UNCERTAINTY_PRESETS
+from risk_env.scenario.scenes import SCENE_NAMES
+
+__all__ = ["Args", "feature_spec", "levels", "main", "make_callbacks", "make_env", "parse_args", "tolerances"]
+NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+"""A model name: a plain file name (no folder, not hidden)."""
+CHECKS: dict[str, Any] = {
+    "seed": cli.nonnegative_int,
+    "total_timesteps": cli.positive_int,
+    "num_envs": cli.positive_int,
+    "seeds": cli.positive_int,
+    "n_steps": cli.positive_int,
+    "batch_size": cli.positive_int,
+    "n_epochs": cli.positive_int,
+    "eval_episodes": cli.positive_int,
+    "checkpoint_every": cli.nonnegative_int,
+    "penalty_warmup": cli.nonnegative_int,
+    "learning_rate": cli.positive_float,
+    "gae_lambda": cli.unit_interval_closed,
+    "gamma": cli.discount,
+    "ent_coef": cli.nonnegative_float,
+    "cost_scale": cli.positive_float,
+    "collision_cost": cli.nonnegative_float,
+    "risk_weight": cli.nonnegative_float,
+    "dual_lr": cli.nonnegative_float,
+    "eval_epsilon": cli.nonnegative_float,
+}
+"""The ``type=`` of each flag beyond its default's type (other floats: finite)."""
 
 
 @dataclass
@@ -158,51 +185,54 @@ def build_parser() -> argparse.ArgumentParser:
         if isinstance(default, bool):
             parser.add_argument(flag, action=argparse.BooleanOptionalAction, default=default, help=text)
         elif isinstance(default, tuple):
-            parser.add_argument(flag, type=int, nargs="+", default=list(default), help=text)
-        else:
             parser.add_argument(
-                flag, type=type(default), default=default, choices=choices.get(f.name), help=text
+                flag,
+                action=cli.CommaList,
+                type=cli.numbers_list(cli.positive_int),
+                default=",".join(map(str, default)),
+                help=text,
             )
+        elif f.name == "out":
+            cli.add_output_options(parser, default, text, resume=True)
+        else:
+            kind = CHECKS.get(f.name, cli.finite_float if isinstance(default, float) else type(default))
+            parser.add_argument(flag, type=kind, default=default, choices=choices.get(f.name), help=text)
     return parser
 
 
-def parse_args(argv: list[str] | None = None) -> Args:
-    """The CLI: one ``--flag`` per field of :class:`Args`."""
-    parser = build_parser()
-    args = Args(**vars(parser.parse_args(argv)))
+def parse_args(argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None) -> Args:
+    """The CLI: one ``--flag`` per field of :class:`Args` (and ``--overwrite``, ``--resume``)."""
+    parser = parser or build_parser()
+    namespace = vars(parser.parse_args(argv))
+    run = {k: namespace.pop(k) for k in ("overwrite", "resume")}
+    args = Args(**namespace)
     args.net_arch = tuple(args.net_arch)
-    if args.total_timesteps < 1 or args.num_envs < 1 or args.n_steps < 1 or args.seeds < 1:
-        parser.error("--total-timesteps, --num-envs, --n-steps and --seeds must be >= 1")
-    bad = [u for u in levels(args) if u not in ("low", "medium", "high")]
-    if bad or len(levels(args)) > args.num_envs:
-        parser.error(f"--uncertainty must list low, medium, high (at most --num-envs of them), got {bad}")
+    args.__dict__.update(run)  # read by the output set, not part of the training's record
+    if not NAME.match(args.name):
+        parser.error(f"argument --name: {args.name!r} is not a plain file name (letters, digits, _ . -)")
     try:
-        tolerances(args)
-    except ValueError:
-        parser.error(f"--tolerances must be numbers, got {args.tolerances!r}")
+        found = cli.choices_list(UNCERTAINTY_PRESETS, "uncertainty")(args.uncertainty)
+        if len(found) > args.num_envs:
+            raise argparse.ArgumentTypeError(
+                f"{len(found)} levels for {args.num_envs} env copies (--num-envs)"
+            )
+    except argparse.ArgumentTypeError as error:
+        parser.error(f"argument --uncertainty: {error}")
+    try:
+        epsilons = cli.numbers_list(cli.nonnegative_float)(args.tolerances)
+    except argparse.ArgumentTypeError as error:
+        parser.error(f"argument --tolerances: {error}")
+    from risk_env.risk.severity import check_tolerance
+
+    try:
+        for eps in epsilons:
+            check_tolerance(eps, args.severity, "argument --tolerances: value")
+        check_tolerance(args.eval_epsilon, args.severity, "argument --eval-epsilon:")
+    except ValueError as error:
+        parser.error(str(error))
+    if not args.conditioned and args.scene != "paper":
+        parser.error("argument --no-conditioned: it sees one object only: train it on --scene paper")
     return args
-
-
-def levels(args: Args) -> list[str]:
-    """The uncertainty presets of ``--uncertainty``."""
-    return cli.comma_list(args.uncertainty)
-
-
-def tolerances(args: Args) -> list[float]:
-    """The epsilons of ``--tolerances``."""
-    return [float(t) for t in cli.comma_list(args.tolerances)]
-
-
-def feature_spec(args: Args, dt: float) -> Any:
-    """The :class:`agents.ppo.policy.FeatureSpec` of the run (None: unconditioned, 14 features), with
-    one slot per object of ``--scene``."""
-    from agents.ppo.policy import FeatureSpec
-
-    if not args.conditioned:
-        if args.scene != "paper":
-            raise ValueError("--no-conditioned sees one object only: train it on --scene paper")
-        return None
-    return FeatureSpec(prediction=args.prediction, dt=dt, slots=len(scene_objects(args.scene)))
 
 
 def planned_timesteps(args: Args) -> int:
@@ -215,100 +245,10 @@ def planned_timesteps(args: Args) -> int:
     return -(-args.total_timesteps // rollout) * rollout
 
 
-def make_env(args: Args) -> Any:
-    """The wrapper stack: batched RiskCrossing-v0 copies split over the levels (LevelMix) ->
-    PolicyView (features, epsilon per episode, the PPO reward) -> SB3 VecEnv -> VecMonitor
-    (episode return, length, cost, collision, success) -> VecNormalize (rewards only)."""
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    from agents.ppo.policy import InputLimits
-    from agents.ppo.training import LevelMix, PolicyView, RewardWeights, SB3VecEnv
-
-    env = LevelMix(
-        args.num_envs,
-        levels(args),
-        severity=args.severity,
-        object_motion=args.object_motion,
-        randomize=args.randomize,
-        scene=args.scene,
-    )
-    weights = RewardWeights(
-        args.w_path_error, args.w_progress, args.w_goal, args.cost_scale, args.collision_cost
-    )
-    beta = 0.0 if args.penalty_warmup > 0 and not args.lagrangian else args.risk_weight
-    view = PolicyView(
-        env,
-        InputLimits.of(env.base_scenario, args.forward_only),
-        feature_spec(args, env.base_scenario.dt),
-        weights,
-        tolerances(args),
-        risk_weight=beta,
-        seed=args.seed,
-    )
-    venv = VecMonitor(SB3VecEnv(view), info_keywords=SB3VecEnv.EPISODE_KEYS)
-    return VecNormalize(venv, norm_obs=False, norm_reward=args.normalize_reward, gamma=args.gamma)
-
-
-def make_callbacks(args: Args) -> list[Any]:
-    """Episode statistics (and beta's dual ascent with --lagrangian), checkpoints, progress bar."""
-    from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, ProgressBarCallback
-
-    class RiskStats(BaseCallback):
-        """Logs the episodes finished in each rollout: cost, collision and goal rates, beta; with
-        ``lagrangian`` it then steps beta toward the cost limit (dual ascent)."""
-
-        def __init__(self) -> None:
-            super().__init__()
-            self.episodes: list[dict[str, float]] = []
-            self.history: list[dict[str, float]] = []
-            self.terms: dict[str, float] = {}
-            self.steps = 0
-
-        def _on_step(self) -> bool:
-            for done, info in zip(self.locals["dones"], self.locals["infos"]):
-                for key, value in info["rewards"].items():
-                    self.terms[key] = self.terms.get(key, 0.0) + float(value)
-                self.steps += 1
-                if done:
-                    self.episodes.append(
-                        {k: float(info[k]) for k in ("episode_cost", "collision", "is_success")}
-                    )
-            return True
-
-        def _on_rollout_end(self) -> None:
-            for key, total in self.terms.items():  # each reward term, mean per env step
-                self.logger.record(f"reward/{key}", total / max(self.steps, 1))
-            self.terms, self.steps = {}, 0
-            beta = float(self.training_env.get_attr("risk_weight")[0])
-            if not args.lagrangian and self.num_timesteps >= args.penalty_warmup and beta != args.risk_weight:
-                beta = args.risk_weight  # the warm-up is over: the fixed penalty switches on
-                self.training_env.set_attr("risk_weight", beta)
-            if not self.episodes:
-                return
-            stats = {k: float(np.mean([e[k] for e in self.episodes])) for k in self.episodes[0]}
-            self.logger.record("risk/episode_cost", stats["episode_cost"])
-            self.logger.record("risk/collision_rate", stats["collision"])
-            self.logger.record("risk/goal_rate", stats["is_success"])
-            self.logger.record("risk/beta", beta)
-            if args.lagrangian:
-                beta = max(0.0, beta + args.dual_lr * (stats["episode_cost"] - args.cost_limit))
-                self.training_env.set_attr("risk_weight", beta)
-            self.history.append({**stats, "beta": beta, "timesteps": float(self.num_timesteps)})
-            self.episodes = []
-
-    callbacks: list[Any] = [RiskStats()]
-    if args.checkpoint_every > 0:
-        every = max(args.checkpoint_every // args.num_envs, 1)
-        callbacks.append(
-            CheckpointCallback(every, str(args.out / f"{args.name}_checkpoints"), name_prefix=args.name)
-        )
-    if args.progress_bar:
-        callbacks.append(ProgressBarCallback())
-    return callbacks
-
-
-def train(args: Args) -> dict[str, Any]:
-    """Train, save ``OUT/NAME.zip`` and ``OUT/NAME.json``; returns the metadata written."""
+def train(args: Args, shown: Path | None = None) -> dict[str, Any]:
+    """Train, save ``OUT/NAME.zip`` and ``OUT/NAME.json``; returns the metadata written. ``shown``:
+    the folder the files end up in (recorded in the metadata; default ``args.out``)."""
+    shown = args.out if shown is None else shown
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.logger import configure
@@ -342,7 +282,8 @@ def train(args: Args) -> dict[str, Any]:
     model.save(args.out / f"{args.name}.zip")
     history = callbacks[0].history
     metadata = {
-        "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(args).items()},
+        "args": {k: (str(v) if isinstance(v, Path) else v) for k, v in dataclasses.asdict(args).items()}
+        | {"out": str(shown)},
         "limits": dataclasses.asdict(InputLimits.of(venv.get_attr("base_scenario")[0], args.forward_only)),
         "features": FEATURES if spec is None else spec.size,
         **({} if spec is None else {"feature_spec": dataclasses.asdict(spec)}),
@@ -355,29 +296,38 @@ def train(args: Args) -> dict[str, Any]:
     venv.close()
     print(
         f"trained {model.num_timesteps} env steps in {wall:.1f} s ({metadata['steps_per_s']:,.0f} env steps/s"
-        f" including updates); saved {args.out / (args.name + '.zip')}"
+        f" including updates); saved {shown / (args.name + '.zip')}"
     )
     return metadata
 
 
-def train_seeds(args: Args) -> dict[str, Any]:
+def train_seeds(args: Args, store: Any = None, shown: Path | None = None) -> dict[str, Any]:
     """Train ``args.seeds`` seeds, score each (:func:`benchmarks.ppo_eval.evaluate`), write the
-    table ``OUT/NAME_seeds.md`` (and ``.json``) and copy the best seed to ``OUT/NAME.zip``/``.json``."""
+    table ``OUT/NAME_seeds.md`` (and ``.json``) and copy the best seed to ``OUT/NAME.zip``/``.json``.
+    ``store`` (:class:`benchmarks.output.ChunkStore`): each finished seed is kept there, and a seed
+    found there is not trained again (``--resume``); ``shown``: as for :func:`train`."""
     import shutil
 
     from benchmarks.ppo_eval import best_seed, evaluate, seed_table
 
+    shown = args.out if shown is None else shown
     results: dict[int, dict[str, float]] = {}
     folder = args.out / f"{args.name}_seeds"
     walls: dict[int, dict[str, float]] = {}
     for seed in range(args.seed, args.seed + args.seeds):
-        folder = args.out / f"{args.name}_seeds"
+        key = f"seed{seed}"
+        if store is not None and key in store:
+            walls[seed], results[seed] = store.get(key)
+            print(f"seed {seed}: kept from the interrupted run")
+            continue
         one = dataclasses.replace(args, seed=seed, seeds=1, name=f"{args.name}_seed{seed}", out=folder)
-        meta = train(one)
+        meta = train(one, shown / folder.name)
         walls[seed] = {"wall_time_s": meta["wall_time_s"], "steps_per_s": meta["steps_per_s"]}
         results[seed] = evaluate(
             folder / f"{one.name}.zip", args.eval_episodes, "medium", args.eval_epsilon, seed=0
         )
+        if store is not None:
+            store.put(key, (walls[seed], results[seed]))
         print(f"seed {seed}: " + ", ".join(f"{k} {v:.4g}" for k, v in results[seed].items()))
     best = best_seed(results, args.cost_limit)
     for suffix in (".zip", ".json"):
@@ -395,9 +345,17 @@ def train_seeds(args: Args) -> dict[str, Any]:
     return summary
 
 
+def files(name: str) -> tuple[str, ...]:
+    """The files (and folders) a run named ``name`` writes in ``--out``."""
+    return tuple(f"{name}{suffix}" for suffix in (".zip", ".json", "_seeds.md", "_seeds.json", "_seeds",
+                                                   "_checkpoints", "_logs"))  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Parse the command line, say how many env steps will be trained, and train (every seed)."""
-    args = parse_args(argv)
+    parser = build_parser()
+    args = parse_args(argv, parser)
+    out = cli.open_output(parser, args, args.name, files(args.name), argv)
     planned = planned_timesteps(args)
     if planned != args.total_timesteps:
         print(
@@ -405,7 +363,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             f" of n_steps x num_envs = {args.n_steps} x {args.num_envs} = {args.n_steps * args.num_envs}"
             " env steps"
         )
-    return train(args) if args.seeds == 1 else train_seeds(args)
+    with out:
+        run = dataclasses.replace(args, out=out.dir)
+        return train(run, args.out) if args.seeds == 1 else train_seeds(run, out.store, args.out)
 
 
 if __name__ == "__main__":

@@ -2,9 +2,9 @@
 timed in the same run.
 
     python -m benchmarks.vector_speed                        # 1, 64 and 1,024 copies, exact risk
-    python -m benchmarks.vector_speed --num-envs 1 8 64 --modes vector_entry_point sync async
+    python -m benchmarks.vector_speed --num-envs 1,8,64 --modes vector_entry_point,sync,async
     python -m benchmarks.vector_speed --repeats 10 --out docs/results
-    python -m benchmarks.vector_speed --objects 1 2 4 --modes vector_entry_point
+    python -m benchmarks.vector_speed --objects 1,2,4 --modes vector_entry_point
 
 Random actions (the same for every mode) drive the copies, with seeded variations of the scenario
 (``randomize=True``) so that the batch holds states near and far from the object; sampled object
@@ -18,7 +18,9 @@ Python floats), ``numpy`` (the same env held to its numpy path, shown up to 64 c
 ``CartPole-v1`` (Gymnasium's own batched CartPole, for scale). The summary gives the fixed cost
 (a batch step of 1 copy) and the cost per copy (from the smallest and largest batch).
 ``--objects``: the scenes timed by their number of objects (1: the paper's, 2: ``"two_crossing"``,
-4: ``"four_crossing"``; :mod:`risk_env.scenario.scenes`); the targets are for one object.
+4: ``"four_crossing"``; :mod:`risk_env.scenario.scenes`); the targets are for one object. Lists are
+comma-separated, as in every command. ``--out`` writes ``vector_speed.txt`` and its manifest
+(:mod:`benchmarks.output`).
 """
 
 from __future__ import annotations
@@ -26,7 +28,6 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -73,37 +74,47 @@ def batch_stepper(mode: str, num_envs: int, steps: int, **env_kwargs) -> tuple[C
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.vector_speed``."""
     parser = cli.parser("vector_speed", __doc__)
-    parser.add_argument("--num-envs", type=int, nargs="+", default=[1, 64, 1024], help="batch sizes (copies)")
     parser.add_argument(
-        "--modes",
-        nargs="+",
-        choices=MODES,
-        default=["vector_entry_point", "numpy", "sync", "CartPole-v1"],
-        help="what to time (see above)",
+        "--num-envs",
+        action=cli.CommaList,
+        type=cli.numbers_list(cli.positive_int),
+        default="1,64,1024",
+        help="comma list of batch sizes (copies)",
     )
     parser.add_argument(
-        "--estimators", nargs="+", choices=risk_env.ESTIMATOR_NAMES, default=["exact"], help="risk estimators"
+        "--modes",
+        action=cli.CommaList,
+        type=cli.choices_list(MODES, "mode"),
+        default="vector_entry_point,numpy,sync,CartPole-v1",
+        help=f"comma list of what to time, from {', '.join(MODES)} (see above)",
+    )
+    parser.add_argument(
+        "--estimators",
+        action=cli.CommaList,
+        type=cli.choices_list(risk_env.ESTIMATOR_NAMES, "estimator"),
+        default="exact",
+        help=f"comma list of risk estimators, from {', '.join(risk_env.ESTIMATOR_NAMES)}",
     )
     parser.add_argument(
         "--object-motion", choices=risk_env.OBJECT_MOTIONS, default="sampled", help="the object's true motion"
     )
     parser.add_argument(
         "--objects",
-        type=int,
-        nargs="+",
-        choices=sorted(SCENES_BY_COUNT),
-        default=[1, 4],
-        help="objects per scene (1: paper, 2: two_crossing, 4: four_crossing)",
+        action=cli.CommaList,
+        type=cli.choices_list([str(c) for c in sorted(SCENES_BY_COUNT)], "object count"),
+        default="1,4",
+        help="comma list of objects per scene (1: paper, 2: two_crossing, 4: four_crossing)",
     )
-    parser.add_argument("--steps", type=int, default=200, help="batch steps per run")
-    parser.add_argument("--repeats", type=int, default=5, help="runs per row (the best is kept)")
-    parser.add_argument("--max-wrapped", type=int, default=64, help="most copies for sync and async")
+    parser.add_argument("--steps", type=cli.positive_int, default=200, help="batch steps per run")
+    parser.add_argument("--repeats", type=cli.positive_int, default=5, help="runs per row (the best is kept)")
     parser.add_argument(
-        "--out",
-        type=Path,
-        default=None,
-        help="also write the table to OUT/vector_speed.txt (default: print only; the committed one"
-        " is in docs/results)",
+        "--max-wrapped", type=cli.nonnegative_int, default=64, help="most copies for sync and async"
+    )
+    cli.add_output_options(
+        parser,
+        None,
+        "also write the table to OUT/vector_speed.txt (default: print only; the committed one is in"
+        " docs/results)",
     )
     return parser
 
@@ -111,8 +122,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> str:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if min(args.num_envs) < 1 or args.steps < 1 or args.repeats < 1:
-        parser.error("--num-envs, --steps and --repeats must be >= 1")
+    args.objects = [int(c) for c in args.objects]
+    out = (
+        None
+        if args.out is None
+        else cli.open_output(parser, args, "vector_speed", ["vector_speed.txt"], argv)
+    )
 
     reference_steps = 2000
     references = {name: stepper(name, reference_steps) for name in REFERENCES}
@@ -170,9 +185,9 @@ def main(argv: list[str] | None = None) -> str:
     lines += ["", *summary(rows, args.estimators, pendulum)]
     text = "\n".join(lines) + "\n"
     print(text, end="")
-    if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "vector_speed.txt").write_text(text)
+    if out is not None:
+        with out:
+            (out.dir / "vector_speed.txt").write_text(text)
     return text
 
 

@@ -162,8 +162,8 @@ def ppo_training() -> str:
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for path in sorted((ROOT / "agents" / "models").glob("*.json")):
-        if path.stem.endswith("_seeds"):  # the seeds' training times, below their shipped policy
-            continue
+        if path.stem.endswith("_seeds") or path.name.endswith(".manifest.json"):
+            continue  # the seeds' training times (below their shipped policy); output manifests
         meta = json.loads(path.read_text())
         last = meta.get("final_rollout", {})
         args = meta["args"]
@@ -200,7 +200,8 @@ def collided_runs(folder: str) -> str:
     ]
     for r in rows:
         out.append(
-            f"| {r['method']} {r['risk_method']} | {r['uncertainty']} | {float(r['epsilon']):g} |"
+            f"| {r.get('agent') or r['method'].lower() + ':' + r['risk_method']} | {r['uncertainty']} |"
+            f" {float(r['epsilon']):g} |"
             f" {float(r['max_risk']):.1f} | {float(r['d_min']):.2f} | {r['steps']} |"
         )
     if not rows:

@@ -403,7 +403,7 @@ def test_highway_benchmarks_run_small(tmp_path):
     summary = highway_intersection.main(
         ["--episodes", "1", "--agents", "rmpc,idm", "--workers", "1", "--out", str(tmp_path)]
     )
-    assert [s["agent"] for s in summary] == ["rmpc", "idm"]
+    assert [s["agent"] for s in summary] == ["rmpc:worst_case", "idm"]
     for s in summary:
         assert s["episodes"] == 1 and s["collision_rate"] + s["goal_rate"] + s[
             "timeout_rate"

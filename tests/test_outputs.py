@@ -6,25 +6,16 @@ import argparse
 import csv
 import importlib
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from benchmarks import figures, summary, table2, train_ppo
+from benchmarks.__main__ import COMMANDS
 
 ROOT = Path(__file__).resolve().parent.parent
-COMMANDS = (
-    "table2",
-    "sampled",
-    "timing",
-    "env_speed",
-    "vector_speed",
-    "train_ppo",
-    "ppo_study",
-    "highway_render",
-    "highway_intersection",
-)
 COMMITTED = (ROOT / "docs" / "results", ROOT / "agents" / "models")
 
 
@@ -51,8 +42,8 @@ def test_every_flag_has_help_and_shows_its_default(name):
     for marker in ("``", ":class:", ":mod:", ":func:", ":meth:", ":data:", "**"):
         assert marker not in text, f"raw reStructuredText {marker!r} in the help of {name}"
     for action in parser._actions:
-        if isinstance(action, argparse._HelpAction):
-            continue
+        if isinstance(action, argparse._HelpAction) or action.help == argparse.SUPPRESS:
+            continue  # help, and the hidden spellings of earlier versions
         assert action.help, f"{name} {action.option_strings} has no help"
         shown = parser.formatter_class(parser.prog)._get_help_string(action)
         assert "(default" in shown, f"{name} {action.option_strings} shows no default"
@@ -79,11 +70,12 @@ def test_train_ppo_rounds_up_to_whole_rollouts(asked, n_steps, num_envs, trained
     assert train_ppo.planned_timesteps(args) == trained
 
 
-def test_train_ppo_says_when_it_rounds(monkeypatch, capsys):
-    monkeypatch.setattr(train_ppo, "train", lambda args: {"asked": args.total_timesteps})
-    assert train_ppo.main(["--total-timesteps", "4096"]) == {"asked": 4096}
+def test_train_ppo_says_when_it_rounds(monkeypatch, capsys, tmp_path):
+    monkeypatch.setattr(train_ppo, "train", lambda args, shown=None: {"asked": args.total_timesteps})
+    out = ["--out", str(tmp_path)]
+    assert train_ppo.main(["--total-timesteps", "4096", *out]) == {"asked": 4096}
     assert "--total-timesteps 4096 rounded up to 8192" in capsys.readouterr().out
-    train_ppo.main(["--total-timesteps", "8192"])
+    train_ppo.main(["--total-timesteps", "8192", "--overwrite", *out])
     assert "rounded" not in capsys.readouterr().out
 
 
@@ -101,15 +93,25 @@ def test_the_main_jobs_summary_fits_on_a_screen_and_explains_every_failure():
     assert max(map(len, lines)) <= summary.WIDTH
     failed = [c for c, ok, _ in claims if ok is False]
     assert failed, "the committed run has claims that do not hold"
+    listed = [re.match(r"^  (\d+)\. (holds|NO|not run) ", line) for line in lines]
+    numbers = [int(m.group(1)) for m in listed if m]
+    assert numbers == list(range(1, len(numbers) + 1)) and len(numbers) >= 5
+    failing = [m for m in listed if m and m.group(2) == "NO"]
+    holding = len(numbers) - len(failing)
+    assert f"The paper's claims, {len(numbers)} as listed: {holding} hold, {len(failing)} do not." in text
+    assert failing
     for i, line in enumerate(lines):
-        if line.lstrip().startswith("NO "):
+        if re.match(r"^  \d+\. NO ", line):
             why = " ".join(lines[i + 1 : i + 6])
             assert why.lstrip().startswith("why:") and "docs/reproduction.md#" in why
             assert "see docs" not in why, "a specific reason, not only a pointer"
+    for column in ("e_acc: ", "d_min: ", "failed solver steps: "):  # each column defined on its line
+        assert sum(line.startswith(column) for line in lines) == 1, column
+    assert "e_acc/d_min" not in text and "failed solves" not in text
     grid = [r for r in rows if (r["method"], r["risk_method"]) == ("RMPC", "grid")]
     grid_failures = sum(r["failed_solves"] for r in grid)
     assert grid_failures > 0
-    assert f"RMPC grid: {grid_failures} failed solves" in text and summary.ANCHORS["grid"] in text
+    assert f"rmpc:grid: {grid_failures} failed solver steps" in text and summary.ANCHORS["grid"] in text
     assert "each the same in all" not in text  # the PPO rows vary: the policies see epsilon and the level
     ppo = [r for r in rows if r["method"] == "PPO"]
     assert len({(r["e_acc"], r["d_min"]) for r in ppo}) > 2

@@ -73,6 +73,13 @@ def test_every_python_block_runs_alone(index, tmp_path):
     result = run_alone(PYTHON_BLOCKS[index], tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stdout.strip(), "each block prints what it found"
+    if index == 0:  # an episode's summary, not the last step's values
+        for word in ("smallest distance", "largest risk", "goal", "collision"):
+            assert word in result.stdout, word
+    if index == 1:  # the PPO policy's return beside the MPC's, on the same episode
+        lines = result.stdout.strip().splitlines()
+        assert len(lines) == 2 and all("return" in line for line in lines)
+        assert lines[0].startswith("PPO") and lines[1].startswith("SMPC")
 
 
 def test_readme_links_resolve():

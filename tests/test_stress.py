@@ -82,9 +82,20 @@ def test_infeasible_step_certifies_only_what_no_input_can_clear():
 
 def test_stress_benchmark_on_a_few_scenes(tmp_path, capsys):
     summary = stress.main(
-        ["--scenes", "3", "--agents", "rmpc,smpc0", "--workers", "1", "--out", str(tmp_path), "--seed", "5"]
+        [
+            "--scenes",
+            "3",
+            "--agents",
+            "rmpc,smpc:paper:0",
+            "--workers",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--seed",
+            "5",
+        ]
     )
-    assert [s["agent"] for s in summary] == ["rmpc", "smpc0"]
+    assert [s["agent"] for s in summary] == ["rmpc:worst_case", "smpc:exact:paper:0"]
     with (tmp_path / "stress.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == stress.EPISODE_COLUMNS and len(rows) == 6
@@ -95,8 +106,8 @@ def test_stress_benchmark_on_a_few_scenes(tmp_path, capsys):
         assert s["solve_ms_p50"] <= s["solve_ms_p95"] <= s["solve_ms_p99"] <= s["solve_ms_max"]
         assert s["fallback_pct"] == pytest.approx(s["soft_pct"] + s["manoeuvre_pct"], abs=2e-3)
     md = (tmp_path / "stress.md").read_text()
-    assert "Command: `python -m benchmarks.stress --scenes 3 --agents rmpc,smpc0" in md
-    assert "| rmpc | RMPC worst_case | 0 | 3 |" in md
+    assert "Command: `python -m benchmarks.stress --scenes 3 --agents rmpc,smpc:paper:0" in md
+    assert "| rmpc:worst_case | RMPC worst_case | - | 3 |" in md
 
 
 def test_every_flag_has_help_and_shows_its_default():
@@ -124,14 +135,15 @@ def test_stress_over_two_hundred_scenes(tmp_path):
     epsilon = 0, no avoidable collision but those a manoeuvre avoids by under 1 cm, fallback
     steps under 2.5 % (about half of them certified infeasible), p99 step times within 30 ms
     (RMPC) and 60 ms (exact SMPC); for the SMPC at epsilon = 1000, fallbacks under 0.5 %."""
-    argv = ["--agents", "rmpc,smpc0,smpc1000", "--workers", "1", "--out", str(tmp_path)]
+    argv = ["--agents", "rmpc,smpc:paper:0,smpc:paper:1000", "--workers", "1", "--out", str(tmp_path)]
     summary = {s["agent"]: s for s in stress.main(argv)}
     with (tmp_path / "stress.csv").open() as f:
         rows = list(csv.DictReader(f))
-    for name, p99 in (("rmpc", 30.0), ("smpc0", 60.0)):
+    for name, p99 in (("rmpc:worst_case", 30.0), ("smpc:exact:paper:0", 60.0)):
         s = summary[name]
         avoidable = [r for r in rows if r["agent"] == name and r["avoidable"] == "True"]
         assert all(float(r["witness_clearance"]) < 0.01 for r in avoidable), avoidable
         assert s["fallback_pct"] < 2.5 and s["infeasible_pct"] > 0.3 * s["fallback_pct"]
         assert s["solve_ms_p99"] <= p99
-    assert summary["smpc1000"]["fallback_pct"] < 0.5 and summary["smpc1000"]["solve_ms_p99"] <= 60.0
+    smpc1000 = summary["smpc:exact:paper:1000"]
+    assert smpc1000["fallback_pct"] < 0.5 and smpc1000["solve_ms_p99"] <= 60.0
