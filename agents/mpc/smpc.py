@@ -39,8 +39,8 @@ class SMPC(PathFollowingMPC):
 
     The exact risk's constraint is written ``max(clearance, (epsilon - R)/scale) >= backoff``, and
     ``clearance >= backoff`` alone at epsilon = 0 (the core's ``"zero"`` variant). R there is
-    :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`: the env's quadrature cut at +-5 sigma (40 nodes,
-    not 48) with its bounded shortfall added back, never below the env's R and above it by at most
+    :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`: the env's quadrature cut at +-5 sigma (54 nodes,
+    not 66) with its bounded shortfall added back, never below the env's R and above it by at most
     5.7e-7 E[s]; its derivatives are those of the integral (see
     :func:`~risk_env.risk.estimators.disc_probability`), a third of the cost of differentiating the rule. The
     clearance is the distance from the ego centre to where the object may be, minus ``r_e + r_o``:

@@ -194,7 +194,7 @@ class Problem:
     rollout: ca.Function
     """(x_0 (NX,), inputs (NU, N)) -> states (NX, N): the model f, accumulated."""
     beliefs: ca.Function
-    """object measurement (5,) -> (N+1, 11) belief fields at n = 0..N (``Belief.as_array`` order)."""
+    """object measurement (5,) -> (N+1, Belief.SIZE) belief fields at n = 0..N (``Belief.as_array`` order)."""
     lbg: np.ndarray
     ubg: np.ndarray
     x_index: np.ndarray
