@@ -64,14 +64,22 @@ def _episode(agent: SMPC, env: gym.Env, seed: int) -> tuple[dict, list[float], l
     return info, applied, actions
 
 
-def test_budget_holds_in_closed_loop_and_accumulator_is_the_applied_sum() -> None:
+@pytest.mark.parametrize("allocation", ["share", "horizon"])
+def test_budget_holds_in_closed_loop_and_accumulator_is_the_applied_sum(allocation: str) -> None:
     """Medium uncertainty, sampled motion: the episode risk stays within B whenever no fallback
     acted, and the agent's spent risk is the sum of its applied one-step risks and matches the
     env's ``info["episode_risk"]`` (float32 observations: 1e-5 relative). Seed 1 spends most of B."""
     budget = 0.3
     env = gym.make("RiskCrossing-v0", uncertainty="medium", severity="probability", object_motion="sampled")
-    agent = SMPC.from_env(env, risk_budget=budget, risk_tolerance=math.inf, max_solve_time=math.inf)
-    assert agent._problem("general").acc_index.size == agent.horizon
+    agent = SMPC.from_env(
+        env,
+        risk_budget=budget,
+        risk_tolerance=math.inf,
+        max_solve_time=math.inf,
+        budget_allocation=allocation,
+    )
+    rows = agent.horizon if allocation == "horizon" else 0  # "share": no rows, a step's epsilon
+    assert agent._problem("general").acc_index.size == rows
     spent_any = 0.0
     for seed in (0, 1):
         info, applied, _ = _episode(agent, env, seed)
@@ -118,7 +126,12 @@ def test_budget_and_weight_sum_over_every_object_slot() -> None:
         "RiskCrossing-v0", uncertainty="medium", severity="probability", scene="two_crossing", max_steps=40
     )
     agent = SMPC.from_env(
-        env, risk_budget=budget, risk_weight=1.0, risk_tolerance=math.inf, max_solve_time=math.inf
+        env,
+        risk_budget=budget,
+        risk_weight=1.0,
+        risk_tolerance=math.inf,
+        max_solve_time=math.inf,
+        budget_allocation="horizon",
     )
     assert agent.slots == 2
     pr = agent._problem("general")
@@ -130,3 +143,32 @@ def test_budget_and_weight_sum_over_every_object_slot() -> None:
     assert agent.spent_risk() == pytest.approx(info["episode_risk"], rel=1e-5, abs=1e-9)
     if agent.failures == 0:
         assert info["episode_risk"] <= budget * (1 + 1e-6)
+
+
+def test_a_share_of_what_is_left_per_step() -> None:
+    """``budget_allocation="share"``: every step's one-step risk is at most alpha times what was
+    left of the budget before it, so the budget never runs out."""
+    budget, share = 0.3, 0.5
+    env = gym.make("RiskCrossing-v0", uncertainty="medium", severity="probability", object_motion="sampled")
+    agent = SMPC.from_env(
+        env, risk_budget=budget, budget_share=share, risk_tolerance=math.inf, max_solve_time=math.inf
+    )
+    obs, _ = env.reset(seed=1)
+    agent.reset()
+    done, spent, largest = False, 0.0, 0.0
+    while not done:
+        action, _ = agent.predict(obs)
+        report = agent.last_solve
+        assert report.risk_tolerance == pytest.approx(share * (budget - spent), rel=1e-12)
+        if report.fallback is None:
+            assert report.risk[0] <= share * (budget - spent) + 1e-9
+        spent += float(report.risk[0])
+        largest = max(largest, float(report.risk[0]))
+        obs, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+    assert agent.spent_risk() == pytest.approx(spent, rel=1e-12)
+    assert spent < budget and largest > 0.0
+    with pytest.raises(ValueError, match=r"budget_share must lie in \(0, 1\]"):
+        SMPC.from_env(env, risk_budget=budget, budget_share=0.0)
+    with pytest.raises(ValueError, match="budget_allocation must be one of"):
+        SMPC.from_env(env, risk_budget=budget, budget_allocation="greedy")

@@ -8,6 +8,7 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import risk_env
+import risk_env.prediction
 from risk_env import Variations
 from risk_env.envs.pcg64 import VECTORIZED_MIN, GeneratorBatch
 from risk_env.envs.vector_env import SCALAR_COPIES, RiskCrossingVectorEnv
@@ -228,8 +229,11 @@ def test_bad_construction() -> None:
         RiskCrossingVectorEnv(num_envs=0)
     with pytest.raises(TypeError, match="object_sped"):
         RiskCrossingVectorEnv(num_envs=2, object_sped=2.0)
-    with pytest.raises(ValueError, match="does not render"):
+    with pytest.raises(ValueError, match="takes no render_mode"):
         RiskCrossingVectorEnv(num_envs=2, render_mode="rgb_array")
+    paper = risk_env.Scenario.preset("low")
+    with pytest.raises(ValueError, match="takes no predictor"):
+        RiskCrossingVectorEnv(num_envs=2, predictor=risk_env.prediction.ConstantPredictor(paper))
     with pytest.raises(ValueError, match="autoreset_mode"):
         RiskCrossingVectorEnv(num_envs=2, autoreset_mode="sometimes")
     env = RiskCrossingVectorEnv(num_envs=2)

@@ -11,15 +11,15 @@ import math
 import os
 from typing import Any, ClassVar
 
-import casadi as ca
 import numpy as np
 
 from agents.base import SolveReport, predict_each
 from agents.mpc import measure
+from agents.mpc.hooks import RiskForm
 from agents.mpc.measure import FREE_MARGIN
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, soft_variant
-from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
+from agents.mpc.nlp.parameters import parameter_vector
 from agents.mpc.nlp.solver import (
     DEFAULT_JIT_CACHE,
     SOLVERS,
@@ -29,11 +29,12 @@ from agents.mpc.nlp.solver import (
     cached_problem,
     call_solver,
 )
-from agents.mpc.objects import check_slots, combine, slot_scenario
+from agents.mpc.objects import MODE_THRESHOLD, Slots, check_slots, check_threshold, combine
 from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step, StepContext, StepInput
 from risk_env import checks
 from risk_env import observation as ob
 from risk_env.prediction.belief import Belief
+from risk_env.prediction.predictors import Predictor, make_predictor
 from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk
 from risk_env.scenario.scenario import Scenario
 
@@ -48,7 +49,7 @@ SOFT_PENALTY = 1e4
 """Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
 
 
-class PathFollowingMPC:
+class PathFollowingMPC(RiskForm):
     """Path-following MPC with a risk constraint; the subclasses say which (:class:`agents.RMPC`,
     :class:`agents.SMPC`). The problem is in :mod:`agents.mpc.nlp.ocp`, its solver in
     :mod:`agents.mpc.nlp.solver`.
@@ -99,10 +100,20 @@ class PathFollowingMPC:
             against every present object (:mod:`agents.mpc.objects`); slot k takes object k's radius,
             mass and uncertainty, slots beyond the scenario's objects the last object's. An
             observation with another slot count raises ``ValueError`` naming both.
+        predictor: the objects' prediction: ``None`` or ``"constant"`` (the paper's, made inside the
+            NLP from each slot's measurement) or any :class:`risk_env.prediction.Predictor`,
+            whose modes (likeliest first) fill ``modes`` rows per object slot as solver
+            parameters: one built solver serves every scene (:class:`agents.mpc.objects.Slots`).
+        modes: M, the mode slots per object (default 3 with a predictor, 1 without).
+        mode_threshold: w_min in [0, 1]: the RMPC plans against every mode of at least this weight
+            (the likeliest alone when none is); the SMPC against all, each weighted.
     """
 
     risk_method: str = ""
     RISK_METHODS: ClassVar[tuple[str, ...]] = ()
+    WEIGHTED: ClassVar[bool] = False
+    """Whether the risk is an expectation, summed over a mixture's modes with their weights (the
+    SMPC); else every mode of weight at least ``mode_threshold`` is a row of its own (the RMPC)."""
     ZERO_TOLERANCE_VARIANT: ClassVar[bool] = False
     """Whether the subclass has an exact, cheaper form at epsilon = 0 (``_margin(..., zero=True)``)."""
 
@@ -126,6 +137,9 @@ class PathFollowingMPC:
         max_solve_time: float | None = None,
         soft_penalty: float = SOFT_PENALTY,
         object_slots: int | None = None,
+        predictor: str | Predictor | None = None,
+        modes: int | None = None,
+        mode_threshold: float = MODE_THRESHOLD,
     ) -> None:
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env Scenario, got {type(scenario).__name__}")
@@ -142,12 +156,16 @@ class PathFollowingMPC:
         self.scenario = scenario
         self.slots = check_slots(object_slots, scenario)
         """K, the object slots (fixed at construction)."""
-        self._numbers = slot_numbers(scenario, self.slots)
-        slot_scenarios = [slot_scenario(scenario, k) for k in range(self.slots)]
-        self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in slot_scenarios)
-        """Each slot's risk estimator (its radius, mass and uncertainty)."""
+        chosen = None if predictor in (None, "constant") else make_predictor(predictor, scenario)
+        self._slots = Slots(scenario, self.slots, chosen, modes)
+        self.mode_threshold = check_threshold(mode_threshold)
+        """w_min: the RMPC plans against every mode of at least this weight (the SMPC: all)."""
+        self._numbers = self._slots.numbers
+        scenarios = [self._slots.scenario_of(row) for row in range(self._slots.rows)]
+        self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in scenarios)
+        """Each planning row's risk estimator (object k's radius, mass and uncertainty; row k M + m)."""
         self.estimator = self.estimators[0]
-        self._worsts = tuple(WorstCaseRisk(s) for s in slot_scenarios)
+        self._worsts = tuple(WorstCaseRisk(s) for s in scenarios)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
         self.settings = SolverSettings(
             solver=solver,
@@ -172,11 +190,13 @@ class PathFollowingMPC:
         self.last_solve: SolveReport | None = None
         self.last_solves: list[SolveReport] = []
         self._memory: dict[int, dict[str, Any]] = {}
-        self._problems: dict[str, Problem] = {}
+        self._problems: dict[tuple[str, int], Problem] = {}
         self._maps: dict[tuple[str, str, str], np.ndarray] = {}
         self._manoeuvre_time = MANOEUVRE_TIME
         variant = self._risk_variant()
-        built = [self._problem(v) for v in ("free", variant, soft_variant(variant))]
+        variants = ("free", variant, soft_variant(variant))
+        # given beliefs: the NLPs of as many rows as a step needs are built when it first does
+        built = [self._problem(v, 1 if self._slots.given else None) for v in variants]
         self.build_time = sum(p.build_time for p in built)
         """Seconds spent building (with jit: compiling) the solvers at construction; 0 when they came
         from the process-wide cache."""
@@ -243,78 +263,36 @@ class PathFollowingMPC:
         self.last_solve = reports[-1]
         return actions, None
 
-    # ------------------------------------------------------------------ subclass hooks
-    def _estimator_key(self) -> tuple[Any, ...]:
-        """What, besides the scenario and the solver settings, changes the built problem."""
-        raise NotImplementedError
-
-    def _estimator(self, scenario: Scenario) -> RiskEstimator:
-        """The agent's estimator for one slot's single-object ``scenario``."""
-        raise NotImplementedError
-
-    def _risk_parameter_shape(self) -> tuple[int, int]:
-        """Shape of the per-step risk data parameter ((0, 0): none)."""
-        return (0, 0)
-
-    def _margin(
-        self, ego: ca.SX, beliefs: list[Belief], epsilon: ca.SX, data: ca.SX, numbers: ca.SX, zero: bool
-    ) -> ca.SX:
-        """Symbolic rows of one stage (:data:`agents.mpc.nlp.ocp.Margin`), each >= 0 iff the risk bound
-        holds at this step for every active slot; ``zero``: the form for epsilon = 0 (only with
-        :attr:`ZERO_TOLERANCE_VARIANT`)."""
-        raise NotImplementedError
-
-    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
-        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, and
-        the solver iterations that took; None: start from the rollouts."""
-        return None
-
-    def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
-        """Per-step risk data ``(N, K J, 3)`` for one solve, the slots' blocks stacked (Monte
-        Carlo: fresh draws for the present slots, zeros for the absent ones)."""
-        return np.zeros((self.horizon, 0, 0))
-
-    def _slot_risk(self, slot: int, ego: np.ndarray, belief: Belief, data: np.ndarray) -> np.ndarray:
-        """Slot ``slot``'s risk ``(N,)`` of ego states ``(N, 4)`` against its beliefs at n = 1..N
-        (``data``: its block ``(N, J, 3)``)."""
-        raise NotImplementedError
-
-    def _risk_numpy(self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray) -> np.ndarray:
-        """Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present slots (``futures[k]``
-        not None) of their risks at n = 1..N; zeros when no object is present."""
-        rows = data.shape[1] // self.slots if data.size else 0
+    def _risk_numpy(
+        self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray, weights: Any = None
+    ) -> np.ndarray:
+        """Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present rows (``futures[k]``
+        not None) of their risks at n = 1..N, each times its mode's weight where the risk is an
+        expectation (:attr:`WEIGHTED`); zeros when no object is present."""
+        rows = data.shape[1] // len(futures) if data.size else 0
         terms = [
             self._slot_risk(k, ego, f, data[:, k * rows : (k + 1) * rows])
+            * (weights[k] if self.WEIGHTED and weights is not None and self._slots.given else 1.0)
             for k, f in enumerate(futures)
             if f is not None
         ]
         return combine(terms) if terms else np.zeros(np.shape(ego)[:-1])
 
-    def _risk_terms(self) -> tuple[bool, bool]:
-        """``(budget, weight)``: whether the NLP carries the episode risk budget and the weighted
-        risk in its objective (:mod:`agents.mpc.nlp.risk_budget`); neither by default."""
-        return (False, False)
+    def _risk_variant(self, epsilon: float | None = None) -> str:
+        """The risk rows' form at ``epsilon`` (default: the agent's)."""
+        epsilon = self._epsilon if epsilon is None else epsilon
+        return "zero" if self.ZERO_TOLERANCE_VARIANT and epsilon <= 0.0 else "general"
 
-    def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
-        """Symbolic R of one stage, the budget's and the cost's (with :meth:`_risk_terms`): the
-        sum over the active slots (:data:`agents.mpc.nlp.ocp.RiskValue`)."""
-        raise NotImplementedError
-
-    def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
-        """The risk terms' parameters (:data:`agents.mpc.nlp.parameters.TERMS`) of batch entry
-        ``index`` (empty without terms); ``new_episode``: its memory was dropped."""
-        return np.zeros(0)
-
-    def _risk_variant(self) -> str:
-        return "zero" if self.ZERO_TOLERANCE_VARIANT and self._epsilon <= 0.0 else "general"
-
-    def _problem(self, variant: str) -> Problem:
-        if variant not in self._problems:
+    def _problem(self, variant: str, rows: int | None = None) -> Problem:
+        """The built NLP of ``variant`` with ``rows`` rows of beliefs (default: every row)."""
+        rows = self._slots.rows if rows is None else rows
+        if (variant, rows) not in self._problems:
             key = (
                 type(self).__name__,
                 variant,
                 problem_key(self.scenario),  # not epsilon, v_ref, the uncertainty, objects: parameters
-                self.slots,
+                rows,
+                self._slots.given,
                 self._estimator_key(),  # also for "free": the parameter layout (e.g. draws) differs
                 self.settings.key(),
                 self._risk_terms(),
@@ -328,10 +306,11 @@ class PathFollowingMPC:
                 self._risk_parameter_shape(),
                 self._risk_value if any(self._risk_terms()) else None,
                 self._risk_terms(),
-                self.slots,
+                rows,
+                self._slots.given,
             )
-            self._problems[variant] = cached_problem(key, build)
-        return self._problems[variant]
+            self._problems[variant, rows] = cached_problem(key, build)
+        return self._problems[variant, rows]
 
     def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:
         """:func:`agents.mpc.measure.risk_possible` for slot ``slot``'s object."""
@@ -352,7 +331,7 @@ class PathFollowingMPC:
         try:
             with Budget.open(self.max_solve_time) as budget:
                 data = self._measure(index, obs_vec)
-                result = Step(self._context(), data, budget).run()
+                result = Step(self._context(data), data, budget).run()
         finally:
             if collecting:
                 gc.enable()
@@ -361,19 +340,23 @@ class PathFollowingMPC:
         self.failures += int(result.failed)
         return result.report
 
-    def _context(self) -> StepContext:
-        """What a step uses that the controller owns."""
+    def _context(self, data: StepInput | None = None) -> StepContext:
+        """What a step uses that the controller owns (its risk with the rows' weights and its
+        epsilon: ``data``'s)."""
+        weights = None if data is None else data.weights
+        epsilon = self._epsilon if data is None else data.epsilon
+        rows = self._slots.rows if data is None or data.rows is None else data.rows
         return StepContext(
             scenario=self.scenario,
             settings=self.settings,
-            problem=self._problem,
-            built=self._problems,
+            problem=functools.partial(self._problem, rows=rows),
+            built={v: pr for (v, r), pr in self._problems.items() if r == rows},
             call=self._call,
-            risk=self._risk_numpy,
+            risk=functools.partial(self._risk_numpy, weights=weights),
             worsts=self._worsts,
-            pilot=self._pilot_plan,
+            pilot=functools.partial(self._pilot_plan, epsilon=epsilon),
             maps=self._maps,
-            epsilon=self._epsilon,
+            epsilon=epsilon,
             backoff=self.backoff,
             cold_starts=self.cold_starts,
             max_solve_time=self.max_solve_time,
@@ -389,12 +372,23 @@ class PathFollowingMPC:
         if memory is not None and measure.new_episode(memory, o):
             memory = None
         x0 = measure.measured_state(self.scenario, o)
-        numbers = self._numbers
-        futures = measure.slot_beliefs(self._problem("free"), o, numbers)
-        # a slot is active when its object is present and may reach the ego within the horizon
-        active = np.array([f is not None and self._risk_possible(x0, f, k) for k, f in enumerate(futures)])
-        variant = self._risk_variant() if active.any() else "free"
+        futures, weights = self._slots.beliefs(self._problem("free"), o)
+        # a row is active when its object is present, its mode counts (the RMPC: w >= w_min) and
+        # it may reach the ego within the horizon
+        floor = self.mode_threshold if not self.WEIGHTED else 0.0
+        counts = [f is not None and weights[k] > 0 and weights[k] >= floor for k, f in enumerate(futures)]
+        active = np.array([c and self._risk_possible(x0, futures[k], k) for k, c in enumerate(counts)])
+        epsilon = self._step_epsilon(index, memory is None)
+        variant = self._risk_variant(epsilon) if active.any() else "free"
         data = self._risk_data(futures)
         terms = self._terms_parameters(index, memory is None)
-        p = parameter_vector(self._epsilon, self.scenario.ego.v_ref, o.objects, active, numbers, data, terms)
-        return StepInput(index, obs_vec, memory, x0, futures, active, variant, data, p)
+        objects = np.repeat(o.objects, self._slots.modes, axis=0)
+        rows, keep = self._slots.packing(active, data.size > 0)
+        p = parameter_vector(
+            epsilon, self.scenario.ego.v_ref, objects[keep], active[keep], self._numbers[keep], data, terms
+        )
+        packed = [futures[j] if active[j] else None for j in keep]
+        p = np.concatenate([p, self._slots.given_block(packed, weights[keep])])
+        return StepInput(
+            index, obs_vec, memory, x0, futures, active, variant, data, p, weights, epsilon, rows
+        )

@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 
-from agents.mpc.nlp.solver import Problem
 from risk_env import observation as ob
 from risk_env.models.frame import to_frame
 from risk_env.models.ops import NUMPY
@@ -27,16 +26,6 @@ def measured_state(scenario: Scenario, o: ob.Observation) -> np.ndarray:
     theta_p = float(point(scenario.path, lam)[2])
     theta = theta_p + float(NUMPY.wrap_angle(o.ego_pose[2] - theta_p))
     return np.array([o.ego_pose[0], o.ego_pose[1], theta, lam, o.ego_input[0], o.ego_input[1]])
-
-
-def slot_beliefs(problem: Problem, o: ob.Observation, numbers: np.ndarray) -> list[Belief | None]:
-    """Each slot's beliefs at n = 1..N (fields ``(N,)``) from its measurement, by the built
-    problem's own prediction (``numbers``: the slots' rows of :func:`agents.mpc.nlp.parameters.slot_numbers`);
-    None for an absent slot."""
-    return [
-        Belief.from_array(np.asarray(problem.beliefs(o.objects[k], numbers[k, 2:]))[1:]) if here else None
-        for k, here in enumerate(o.present)
-    ]
 
 
 def reach(scenario: Scenario, v_last: float) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 from agents.base import SolveReport
 from agents.mpc.controller import PathFollowingMPC
 from agents.mpc.nlp import risk_budget as rb
-from agents.mpc.nlp.parameters import INACTIVE
+from agents.mpc.nlp.parameters import INACTIVE, NUMBER_COLUMNS
 from agents.mpc.objects import slot_rows, symbolic
 from risk_env import checks
 from risk_env.models.ops import CASADI
@@ -76,9 +76,12 @@ class SMPC(PathFollowingMPC):
     row per slot. With one slot these are the single-object rows exactly.
 
     **Episode risk budget and risk weight** (:mod:`agents.mpc.nlp.risk_budget`, where the guarantee and its
-    assumptions are written out): ``risk_budget=B`` asks every plan for spent + sum_n R_{n|k} <= B,
-    spent being the risk of the steps already taken (:meth:`spent_risk`), so that an episode
-    without a fallback has a summed risk (``info["episode_risk"]``) of at most B: with
+    assumptions are written out): ``risk_budget=B`` bounds the summed risk of an episode without a
+    fallback (``info["episode_risk"]``) by B, spent being the risk of the steps already taken
+    (:meth:`spent_risk`). ``budget_allocation="share"`` (default) lets each step's rows use
+    ``min(epsilon, alpha (B - spent))`` (``budget_share`` alpha, 0.5 by default): a step spends
+    where it buys progress, and what is left never runs out; ``"horizon"`` asks every plan for
+    spent + sum_n R_{n|k} <= B (its whole horizon's foreseen risk, a stricter allocation). With
     ``severity="probability"`` a bound on the chance of any collision in the episode, with
     ``"injury"`` on the expected serious injuries per episode. ``risk_tolerance=math.inf`` drops
     the per-step bound (the budget alone). ``risk_weight=w`` adds ``w * sum_n R_{n|k}`` to the
@@ -91,6 +94,7 @@ class SMPC(PathFollowingMPC):
 
     RISK_METHODS = ("exact", "monte_carlo")
     ZERO_TOLERANCE_VARIANT = True
+    WEIGHTED = True
 
     def __init__(
         self,
@@ -103,10 +107,16 @@ class SMPC(PathFollowingMPC):
         pilot_samples: int | None = 100,
         risk_budget: float | None = None,
         risk_weight: float | None = None,
+        budget_allocation: str = "share",
+        budget_share: float = rb.BUDGET_SHARE,
         **kwargs: Any,
     ) -> None:
         self.risk_budget = rb.check_budget(risk_budget)
         """B, the episode risk budget [the severity's unit] (None: none); fixed at construction."""
+        self.budget_allocation = rb.check_allocation(budget_allocation)
+        """How the budget is spent (:data:`agents.mpc.nlp.risk_budget.ALLOCATIONS`)."""
+        self.budget_share = rb.check_share(budget_share)
+        """alpha, the share of what is left of the budget a step may spend (``"share"``)."""
         self.risk_weight = rb.check_weight(risk_weight)
         """w, the weight of sum_n R_{n|k} in the objective (None: none); fixed at construction."""
         self._spent: dict[int, float] = {}
@@ -193,7 +203,20 @@ class SMPC(PathFollowingMPC):
         return ("monte_carlo", est.samples, est.bandwidth, est.smoothing, est.severity_smoothing)
 
     def _risk_terms(self) -> tuple[bool, bool]:
-        return (self.risk_budget is not None, bool(self.risk_weight))
+        return (self.risk_budget is not None and self.budget_allocation == "horizon", bool(self.risk_weight))
+
+    def _step_epsilon(self, index: int, new_episode: bool) -> float:
+        """With ``budget_allocation="share"``: ``min(epsilon, alpha (B - spent_k))``, the step's
+        share of what is left of the budget (:mod:`agents.mpc.nlp.risk_budget`); else epsilon."""
+        if self.risk_budget is None:
+            return self._epsilon
+        if new_episode:
+            self._spent[index] = 0.0
+        if self.budget_allocation != "share":
+            return self._epsilon
+        return rb.share_tolerance(
+            self._epsilon, self.risk_budget, self._spent.get(index, 0.0), self.budget_share
+        )
 
     def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
         """The per-stage R of the budget and the weight: the constraint's own R (exact:
@@ -207,7 +230,8 @@ class SMPC(PathFollowingMPC):
                 r = est.casadi_risk(ego, belief, samples=slot_rows(data, k, J))
             else:
                 r = est.solver_risk(ego, belief)
-            total = numbers[k, 0] * r if total is None else total + numbers[k, 0] * r
+            share = numbers[k, 0] if numbers.shape[1] <= NUMBER_COLUMNS else numbers[k, 0] * numbers[k, 3]
+            total = share * r if total is None else total + share * r
         return total
 
     def _terms_parameters(self, index: int, new_episode: bool) -> np.ndarray:
@@ -250,12 +274,12 @@ class SMPC(PathFollowingMPC):
                     soft = nearest - t * ca.log(ca.sum1(ca.exp(-(dist - nearest) / t)))
                     clearances.append(soft - radius + lift)
                 else:
-                    risks.append(active * est.casadi_risk(ego, belief, samples=draws))
+                    risks.append(weighted(active, numbers, k) * est.casadi_risk(ego, belief, samples=draws))
                 continue
             box = symbolic(self._worsts[k], radius, numbers[k, 2])
             clearances.append(box.distance(ego, belief, CASADI) - radius + lift)
             if not zero:
-                risks.append(active * est.solver_risk(ego, belief))
+                risks.append(weighted(active, numbers, k) * est.solver_risk(ego, belief))
         if zero:  # R <= 0 <=> every disc misses every possible object position (box / draws)
             return ca.vertcat(*clearances)
         total = risks[0]
@@ -274,14 +298,16 @@ class SMPC(PathFollowingMPC):
             nearest = ca.fmin(nearest, c)
         return ca.fmax(nearest, margin)
 
-    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
+    def _pilot_plan(
+        self, index: int, obs_vec: np.ndarray, variant: str, epsilon: float = 0.0
+    ) -> tuple[np.ndarray, int] | None:
         """Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
         ``pilot_samples`` draws, itself solved cold from every rollout (its evaluations cost a
         fifth). At epsilon = 0 (``"zero"``) a plan that misses 100 draws may run into the other
         400 (a solve from it took longer than the rollouts), so that variant starts from them."""
         if self._pilot is None or variant != "general":
             return None
-        self._pilot.risk_tolerance = self._epsilon
+        self._pilot.risk_tolerance = epsilon
         self._pilot._memory.pop(index, None)  # a cold start: every rollout, keep the best
         report = self._pilot._step(index, obs_vec)
         self._pilot.last_solve = report
@@ -305,3 +331,10 @@ class SMPC(PathFollowingMPC):
         if self.risk_method == "monte_carlo":
             return self.estimators[slot].risk(ego, belief, draws=np.moveaxis(data, 1, 0))
         return self.estimators[slot].risk(ego, belief)
+
+
+def weighted(active: ca.SX, numbers: ca.SX, row: int) -> ca.SX:
+    """A row's factor on its risk in the expectation: its active flag, times its mode's weight
+    w with given beliefs (a fourth column of ``numbers``); the mixture's risk is then
+    ``sum_m w_m R_m``, exact by linearity of expectation."""
+    return active if numbers.shape[1] <= NUMBER_COLUMNS else active * numbers[row, 3]

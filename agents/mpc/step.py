@@ -121,6 +121,12 @@ class StepInput:
     variant: str
     data: np.ndarray
     p: np.ndarray
+    weights: np.ndarray | None = None
+    """Each row's mode weight w ``(K M,)`` (1 for the paper's prediction)."""
+    epsilon: float = 0.0
+    """The step's risk tolerance (the agent's, or its share of an episode budget)."""
+    rows: int | None = None
+    """The rows of beliefs of the NLP that runs (the active rows packed; None: all)."""
 
 
 @dataclass(frozen=True)

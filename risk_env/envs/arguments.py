@@ -10,6 +10,7 @@ from typing import Any
 
 from risk_env import checks
 from risk_env.envs.variations import Variations
+from risk_env.prediction.predictors import Predictor, make_predictor
 from risk_env.scenario.scenario import OVERRIDES, Scenario
 
 
@@ -100,3 +101,11 @@ def check_render_mode(value: Any, modes: Sequence[str]) -> str | None:
     if value is not None and value not in modes:
         raise ValueError(f"unknown render_mode {value!r}; expected None or one of {list(modes)}")
     return value
+
+
+def check_predictor(value: Any, scenario: Scenario) -> Predictor | None:
+    """The env's ``predictor``: None for the paper's built-in prediction (``None`` or
+    ``"constant"``), else a :class:`~risk_env.prediction.predictors.Predictor`."""
+    if value is None or value == "constant":
+        return None
+    return make_predictor(value, scenario)

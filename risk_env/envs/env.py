@@ -14,6 +14,7 @@ from risk_env import checks, observation
 from risk_env.envs import arguments
 from risk_env.envs.transition import advance_one, view
 from risk_env.envs.variations import Variations, vary
+from risk_env.prediction.predictors import Predictor
 from risk_env.render.renderers import RENDERERS
 from risk_env.render.view import EnvView
 from risk_env.risk.estimators import RiskEstimator
@@ -22,8 +23,7 @@ from risk_env.scenario.scenario import Scenario
 
 ENV_ID = "RiskCrossing-v0"
 OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
-"""How the objects move: ``"paper"`` (deterministic unicycles) or ``"sampled"`` (one draw per step
-from the prediction model)."""
+"""How the objects move: ``"paper"`` (their unicycles) or ``"sampled"`` (drawn from the prediction)."""
 
 
 class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -88,7 +88,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     2. the ego moves: the unicycle of :mod:`risk_env.models.dynamics` (the map of
        :func:`risk_env.models.dynamics.step`) over ``dt`` with ``(v, omega)``;
     3. each object moves. Its belief ``B_i = predict(scenario, measurement_i, steps=1)[1]`` (with
-       its own uncertainty) is made from its measurement *before* it moves.
+       its own uncertainty; a ``predictor``'s mixture at step 1 instead, its risk
+       ``sum_m w_m R_m``) is made from its measurement *before* it moves.
        ``object_motion="paper"`` (default): it follows its unicycle with its constant inputs,
        which is exactly B_i's mean. ``"sampled"``: its next (c1, c2, v) is one draw from B_i
        (``self.np_random``: 3 uniforms per object, in order), its heading advances with the mean
@@ -131,10 +132,6 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Arguments
 
-    ``gym.make("RiskCrossing-v0", uncertainty="low", risk_tolerance=0.0, risk_estimator="exact",
-    object_motion="paper", reward_risk_weight=0.0, scene="paper", object_slots=None,
-    render_mode=None, renderer="auto", **overrides)``
-
     - ``uncertainty``: the paper's Table I preset, ``"low"`` (default), ``"medium"`` or ``"high"``;
     - ``risk_tolerance``: epsilon [J for the paper's severity]; ``info["risk_violation"]`` is
       ``risk > epsilon``;
@@ -147,6 +144,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
       other side), ``"four_crossing"``; the ``objects=[...]`` override gives any list instead;
     - ``object_slots``: K, the observation's object slots (default: the scenario's number of
       objects; fewer raises);
+    - ``predictor``: the objects' one-step beliefs: ``None`` or ``"constant"`` (default, the
+      paper's) or any :class:`risk_env.prediction.Predictor` (its mixture's risk; see Transition);
     - ``randomize``: draw each episode's scenario around the given one (see Starting State);
       ``variations``: the ranges, a :class:`risk_env.Variations`;
     - ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"`` (pygame; see
@@ -217,6 +216,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         renderer: str = "auto",
         scene: str | None = None,
         object_slots: int | None = None,
+        predictor: str | Predictor | None = None,
         **overrides: Any,
     ) -> None:
         base = arguments.build_scenario(
@@ -232,6 +232,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self.variations: Variations = arguments.check_variations(variations, self.randomize)
         self.object_motion = checks.text("object_motion", object_motion, OBJECT_MOTIONS)
         self.reward_risk_weight = arguments.check_weight(reward_risk_weight)
+        self.predictor: Predictor | None = arguments.check_predictor(predictor, base)
+        """The objects' predictor (None: the paper's, built in; see Arguments)."""
         self.estimators: tuple[RiskEstimator, ...] = make_estimators(risk_estimator, base)
         """One risk estimator per object of ``base_scenario``: their terms sum to ``info["risk"]``."""
         self.estimator: RiskEstimator = self.estimators[0]
@@ -250,7 +252,6 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         )
         self._view = EnvView(self.renderer, render_mode, self.metadata["render_fps"], self.estimator.name)
 
-    # ---------------------------------------------------------------- properties
     @property
     def epsilon(self) -> float:
         """The risk tolerance epsilon (``scenario.risk_tolerance``)."""
@@ -328,6 +329,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
             self._objects,
             uniforms,
             self.np_random,
+            self.predictor,
         )
         risk = total(terms)
         self._ego_input = (v, omega)

@@ -21,7 +21,10 @@ from risk_env.models.dynamics import unicycle_step
 from risk_env.models.ops import MATH, NUMPY, Ops
 from risk_env.models.path import AnyPath, path_error, project
 from risk_env.prediction.belief import Belief, predict_step
+from risk_env.prediction.mixture import Mixture
+from risk_env.prediction.predictors import Predictor
 from risk_env.risk.estimators import RiskEstimator
+from risk_env.risk.mixture_risk import mixture_risk
 from risk_env.scenario.scenario import Scenario
 
 Measurement = tuple[Any, Any, Any, Any, Any]
@@ -54,6 +57,7 @@ def advance_one(
     measurements: Sequence[Any],
     uniforms: list[float] | None,
     rng: np.random.Generator,
+    predictor: Predictor | None = None,
 ) -> tuple[tuple[float, float, float], list[Measurement], list[float]]:
     """Steps 1-3 of the transition for one state, in Python floats (the MATH face).
 
@@ -63,11 +67,18 @@ def advance_one(
     motion; None for the paper's); its risk term R_i is the ego's new state against B_i by
     ``estimators[i]`` (Monte Carlo draws from ``rng``, object by object). Returns the new pose, the
     new measurements and the terms R_i (their sum is the step's risk,
-    :mod:`risk_env.risk.total_risk`).
+    :mod:`risk_env.risk.total_risk`). With a ``predictor`` (None: the paper's, built in) B_i is its
+    mixture's step 1 (:func:`_advance_by`).
     """
     v, omega = action
     x, y, theta = unicycle_step(pose[0], pose[1], pose[2], v, omega, scenario.dt, MATH)
     ego = (x, y, theta, v)
+    if predictor is not None:
+        pairs = [
+            _advance_by(predictor, scenario, estimators[i], uncertainties[i], ego, m, uniforms, i, rng)
+            for i, m in enumerate(measurements)
+        ]
+        return (x, y, theta), [moved for moved, _ in pairs], [risk for _, risk in pairs]
     if len(measurements) == 1:  # the paper's scene: no loop (a step costs ~15 us)
         moved, risk = _advance_object(
             scenario, estimators[0], uncertainties[0], ego, measurements[0], uniforms, rng
@@ -94,6 +105,34 @@ def _advance_object(
     """One object's step of :func:`advance_one`: its next measurement and its risk term R_i."""
     belief = predict_step(scenario, measurement, 1, MATH, uncertainty)
     return move_object(belief, measurement, uniforms, MATH), estimator.risk_one(ego, belief, rng=rng)
+
+
+def _advance_by(
+    predictor: Predictor,
+    scenario: Scenario,
+    estimator: RiskEstimator,
+    uncertainty: Any,
+    ego: tuple[float, float, float, float],
+    measurement: Any,
+    uniforms: list[float] | None,
+    index: int,
+    rng: np.random.Generator,
+) -> tuple[Measurement, float]:
+    """Object ``index``'s step with a ``predictor``: B_i is its mixture at n = 1, the risk term
+    R_i the mixture's (:func:`~risk_env.risk.mixture_risk.mixture_risk`: sum_m w_m R_m, or the
+    worst case over the modes). The paper's motion stays the object's own unicycle; the sampled
+    one draws from the mixture: the mode by one more uniform from ``rng`` when there are several,
+    then (c1, c2, v) from it with the object's 3 uniforms."""
+    modes = predictor.predict(measurement, 1).at(1)
+    risk = float(mixture_risk(estimator, ego, modes, rng=rng))
+    if uniforms is None:
+        return move_object(
+            predict_step(scenario, measurement, 1, MATH, uncertainty), measurement, None, MATH
+        ), risk
+    belief = modes[0][1]
+    if len(modes) > 1:
+        belief = Mixture.pick(modes, float(rng.random()))
+    return move_object(belief, measurement, uniforms[3 * index : 3 * index + 3], MATH), risk
 
 
 class Observed(NamedTuple):

@@ -43,8 +43,7 @@ class RiskCrossingVectorEnv(VectorEnv):
     suits stable-baselines3). Observations ``(B, 10 + 6 K)`` float32, actions ``(B, 2)`` in
     physical units, infos as Gymnasium's vector envs give them: every key of the single env's info
     as an array over copies (``risk_terms`` ``(B, M)``, ``objects`` ``(B, M, 4)``), with its
-    ``_key`` mask (one shared read-only all-True array). Draws nothing (``render_mode`` must be
-    None).
+    ``_key`` mask (one shared read-only all-True array). Draws nothing; the paper's prediction only.
 
     The state lives in one array ``(5 + 5 M, B)``: the ego's pose and last input, then each of the
     M objects' measurement (headings unwrapped); with ``Variations(object_count=True)`` a mask
@@ -61,13 +60,14 @@ class RiskCrossingVectorEnv(VectorEnv):
         **kwargs: Any,
     ) -> None:
         num_envs = checks.integer("num_envs", num_envs, minimum=1)
-        if render_mode is not None:
-            raise ValueError(
-                "the batched RiskCrossing-v0 does not render; use gym.make_vec(..., vectorization_mode="
-                f"'sync') or gym.make for render_mode={render_mode!r}"
-            )
         mode = parse_autoreset_mode(autoreset_mode)
         template = RiskCrossingEnv(**kwargs)  # the single env validates every argument
+        for name, given in (("render_mode", render_mode), ("predictor", template.predictor)):
+            if given is not None:  # neither is batched: the single envs do it
+                raise ValueError(
+                    f"the batched RiskCrossing-v0 takes no {name} (got {given!r}); use"
+                    " gym.make_vec(..., vectorization_mode='sync') or gym.make"
+                )
         self.template = template
         self.base_scenario: Scenario = template.base_scenario
         self.estimators = template.estimators

@@ -50,13 +50,21 @@ import numpy as np
 
 from risk_env import checks
 from risk_env import observation as layout
-from risk_env.highway.common import highway_scenario, policy_period, slip_angle, unwrapped_highway
+from risk_env.highway.common import (
+    check_adapter_config,
+    highway_scenario,
+    policy_period,
+    slip_angle,
+    unwrapped_highway,
+)
 from risk_env.highway.control import highway_action
 from risk_env.highway.idm import IDMEgo, reached
+from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
 from risk_env.models.dynamics import unicycle_step
 from risk_env.models.ops import NUMPY
 from risk_env.models.path import path_error_vector, project
+from risk_env.prediction.predictors import Predictor
 from risk_env.scenario.scenario import ReferencePath, Scenario
 
 INTERSECTION_CONFIG: dict[str, Any] = {
@@ -147,6 +155,10 @@ class IntersectionAdapter:
             (2 m: about half a step at v_ref, so the hand-over comes the step before the lane ends).
         slots: the agent's object slots K (default :data:`DEFAULT_SLOTS`): the nearest K observed
             vehicles are planned against, in one solve.
+        predictor: how the agents predict the other vehicles: ``"lane"`` (default: their routes
+            along highway-env's lanes, :class:`risk_env.highway.lanes.LanePredictor`), ``"constant"``
+            (the paper's: constant speed and turn rate) or any :class:`risk_env.prediction.Predictor`;
+            handed to ``make_agent`` as ``predictor=`` (not for ``"constant"``).
     """
 
     def __init__(
@@ -158,6 +170,7 @@ class IntersectionAdapter:
         destination: str | None = None,
         switch_ahead: float = 2.0,
         slots: int = DEFAULT_SLOTS,
+        predictor: str | Predictor | None = "lane",
         **overrides: Any,
     ) -> None:
         if not callable(make_agent):
@@ -167,7 +180,7 @@ class IntersectionAdapter:
             )
         self.env = env
         base = unwrapped_highway(env)
-        self._check_config(base)
+        check_adapter_config(base)
         self.dt = policy_period(env)
         self.base_scenario = highway_scenario(
             env, uncertainty, risk_tolerance, **{**ADAPTER_DEFAULTS, **overrides}
@@ -180,7 +193,18 @@ class IntersectionAdapter:
         if not (math.isfinite(switch_ahead) and switch_ahead >= 0):
             raise ValueError(f"switch_ahead must be >= 0 [m], got {switch_ahead!r}")
         self.switch_ahead = float(switch_ahead)
+        if not callable(make_agent):
+            raise TypeError(
+                f"make_agent must build an agent for a scenario (e.g. agents.RMPC), got {make_agent!r}"
+            )
         self.make_agent = make_agent
+        if predictor is not None and not isinstance(predictor, Predictor):
+            checks.text("predictor", predictor, HIGHWAY_PREDICTORS)
+        self._predictor_arg = predictor
+        self.predictor: Predictor | None = None
+        """The other vehicles' predictor handed to the agents (None: the paper's, in the NLP); a
+        named one is built on the road network at the first episode (the map: the same at every
+        reset)."""
         self._agents: dict[ReferencePath, Any] = {}
         self.route: RoutePath | None = None
         self.lane = 0
@@ -274,34 +298,13 @@ class IntersectionAdapter:
         half_length = 0.5 * float(base.vehicle.LENGTH)
         return highway_action(v, omega, speed, steering, self.dt, half_length, base.action_type)
 
-    @staticmethod
-    def _check_config(base: Any) -> None:
-        from highway_env.envs.common.action import ContinuousAction
-        from highway_env.envs.common.observation import KinematicObservation
-
-        hint = "build the env with risk_env.highway.make_intersection_env() (INTERSECTION_CONFIG)"
-        action = base.action_type
-        if type(action) is not ContinuousAction or not (action.longitudinal and action.lateral):
-            raise ValueError(
-                f"the adapter needs highway-env's ContinuousAction with throttle and steering, got"
-                f" {type(action).__name__}; {hint}"
-            )
-        if action.dynamical:
-            raise ValueError(f"the adapter needs the kinematic vehicle ('dynamical': False); {hint}")
-        obs = base.observation_type
-        needed = {"presence", "x", "y", "vx", "vy", "heading"}
-        if not isinstance(obs, KinematicObservation) or not needed <= set(obs.features):
-            raise ValueError(
-                f"the adapter needs a Kinematics observation with features {sorted(needed)}; {hint}"
-            )
-        if not obs.absolute or obs.normalize:
-            raise ValueError(f"the adapter needs absolute, unnormalised Kinematics observations; {hint}")
-
     def _begin_episode(self, base: Any) -> None:
         vehicle = base.vehicle
         if vehicle is None:
             raise ValueError("the env has no controlled vehicle: call env.reset() first")
         self._vehicle = vehicle
+        if self.predictor is None and not self._agents:
+            self.predictor = highway_predictor(self._predictor_arg, self.env)
         self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
         self.lane = 0
         for agent in self._agents.values():
@@ -354,7 +357,8 @@ class IntersectionAdapter:
         scenario = self._scenario_for(lane)
         path = self.route.paths[lane]
         if path not in self._agents:
-            self._agents[path] = self.make_agent(scenario, object_slots=self.slots)
+            extra = {} if self.predictor is None else {"predictor": self.predictor}
+            self._agents[path] = self.make_agent(scenario, object_slots=self.slots, **extra)
         return self._agents[path]
 
     def _measure_others(self, rows: np.ndarray) -> np.ndarray:

@@ -106,3 +106,27 @@ def highway_scenario(
     values: dict[str, Any] = {"dt": policy_period(env), "velocity_bounds0": (-SPEED_BOUND, SPEED_BOUND)}
     values.update(overrides)
     return Scenario.preset(uncertainty, risk_tolerance=risk_tolerance, **values)
+
+
+def check_adapter_config(base: Any) -> None:
+    """Raise ``ValueError`` with a hint unless the unwrapped highway-env ``base`` has what
+    :class:`~risk_env.highway.adapter.IntersectionAdapter` needs: continuous throttle and steering on
+    the kinematic vehicle, absolute unnormalised Kinematics observations with headings."""
+    from highway_env.envs.common.action import ContinuousAction
+    from highway_env.envs.common.observation import KinematicObservation
+
+    hint = "build the env with risk_env.highway.make_intersection_env() (INTERSECTION_CONFIG)"
+    action = base.action_type
+    if type(action) is not ContinuousAction or not (action.longitudinal and action.lateral):
+        raise ValueError(
+            f"the adapter needs highway-env's ContinuousAction with throttle and steering, got"
+            f" {type(action).__name__}; {hint}"
+        )
+    if action.dynamical:
+        raise ValueError(f"the adapter needs the kinematic vehicle ('dynamical': False); {hint}")
+    obs = base.observation_type
+    needed = {"presence", "x", "y", "vx", "vy", "heading"}
+    if not isinstance(obs, KinematicObservation) or not needed <= set(obs.features):
+        raise ValueError(f"the adapter needs a Kinematics observation with features {sorted(needed)}; {hint}")
+    if not obs.absolute or obs.normalize:
+        raise ValueError(f"the adapter needs absolute, unnormalised Kinematics observations; {hint}")

@@ -10,8 +10,11 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import highway_scenario, policy_period, unwrapped_highway, vehicle_measurement
+from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.prediction.belief import Belief, predict
+from risk_env.prediction.predictors import Predictor
 from risk_env.risk.estimators import RiskEstimator, make_estimator
+from risk_env.risk.mixture_risk import mixture_risk
 from risk_env.scenario.scenario import Scenario
 
 
@@ -55,6 +58,10 @@ class RiskCostWrapper(gym.Wrapper):
         scenario: a whole :class:`~risk_env.Scenario` instead of ``uncertainty``, ``risk_tolerance``
             and ``overrides``; its ``dt`` must be the env's step (:func:`policy_period`).
         seed: seed of the wrapper's generator until ``reset(seed=...)`` re-seeds it.
+        predictor: the vehicles' one-step beliefs: None or ``"constant"`` (the paper's), ``"lane"``
+            (:class:`risk_env.highway.lanes.LanePredictor` on the env's road network) or any
+            :class:`risk_env.prediction.Predictor`; a mixture's risk is ``sum_m w_m R_m`` (the
+            worst case over the modes for a worst-case estimator).
         **overrides: flat scenario parameters (:data:`risk_env.scenario.scenario.OVERRIDES`), on top of
             :func:`risk_env.highway.highway_scenario`'s.
     """
@@ -68,6 +75,7 @@ class RiskCostWrapper(gym.Wrapper):
         vehicle_index: int = 0,
         scenario: Scenario | None = None,
         seed: int | None = None,
+        predictor: str | Predictor | None = None,
         **overrides: Any,
     ) -> None:
         super().__init__(env)
@@ -95,6 +103,12 @@ class RiskCostWrapper(gym.Wrapper):
         self.vehicle_index = vehicle_index
         self._rng = np.random.default_rng(seed)
         self._before: list[tuple[Any, np.ndarray]] = []
+        self._predictor_arg = predictor
+        self.predictor: Predictor | None = None
+        """The vehicles' predictor (None: the paper's); a named one is built on the road network at
+        the first ``reset``."""
+        if predictor is not None and not isinstance(predictor, Predictor):
+            checks.text("predictor", predictor, HIGHWAY_PREDICTORS)
 
     @property
     def ego(self) -> Any:
@@ -117,6 +131,8 @@ class RiskCostWrapper(gym.Wrapper):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
         obs, info = self.env.reset(seed=seed, options=options)
+        if self.predictor is None:
+            self.predictor = highway_predictor(self._predictor_arg, self.env)
         if seed is not None:
             self._rng = np.random.default_rng(seed)
         self.measure()
@@ -147,6 +163,10 @@ class RiskCostWrapper(gym.Wrapper):
         if not kept:
             return {}
         ego = vehicle_measurement(self.ego)[:4]
+        if self.predictor is not None:  # each vehicle's mixture, seen with the others
+            mixtures = self.predictor.predict_scene(np.array([m for _, m in kept]), 1)
+            risks = [mixture_risk(self.estimator, ego, mix.at(1), rng=self._rng) for mix in mixtures]
+            return {i: float(r) for (i, _), r in zip(kept, risks, strict=True)}
         measurements = np.array([m for _, m in kept]).T  # (5, M): predict takes 5 batched rows
         belief: Belief = predict(self.scenario, measurements, steps=1)[1]
         risks = np.atleast_1d(self.estimator.risk(ego, belief, rng=self._rng))

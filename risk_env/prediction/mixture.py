@@ -112,8 +112,18 @@ class Mixture:
 
     def sample_mode(self, uniform: float) -> Mode:
         """The mode a uniform draw on [0, 1) picks, by inverse transform over the weights."""
-        edges = np.cumsum(self.weights)
-        return self.modes[min(int(np.searchsorted(edges, uniform * edges[-1], side="right")), len(self) - 1)]
+        return self.modes[_pick(self.weights, uniform)]
+
+    @staticmethod
+    def pick(modes: Sequence[tuple[float, Belief]], uniform: float) -> Belief:
+        """The belief a uniform draw on [0, 1) picks from ``[(w_m, belief), ...]`` (:meth:`at`)."""
+        return modes[_pick(np.array([w for w, _ in modes]), uniform)][1]
+
+
+def _pick(weights: np.ndarray, uniform: float) -> int:
+    """Inverse transform: the index whose weight interval holds ``uniform * sum(weights)``."""
+    edges = np.cumsum(weights)
+    return min(int(np.searchsorted(edges, uniform * edges[-1], side="right")), len(weights) - 1)
 
 
 def check_spreads(belief: Belief, name: str) -> None:

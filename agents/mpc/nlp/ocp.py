@@ -72,9 +72,11 @@ import casadi as ca
 import numpy as np
 
 from agents.mpc.nlp.parameters import (
+    NUMBER_COLUMNS,
     SLOT_SIZE,
     TERMS,
     UNCERTAINTY_NUMBERS,
+    given_size,
     symbolic_uncertainty,
 )
 from risk_env.models.dynamics import casadi_step
@@ -139,11 +141,13 @@ def stage_functions(
     risk_shape: tuple[int, int],
     value: RiskValue | None = None,
     slots: int = 1,
+    given: bool = False,
 ) -> dict[str, ca.Function | None]:
     """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, beliefs (K, Belief.SIZE), epsilon, data,
-    slot numbers (K, 3)) -> rows (None for ``"free"``) and, with ``value``, ``risk_value`` (ego,
-    beliefs, data, slot numbers) -> R (None for ``"free"`` or without ``value``)."""
+    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, beliefs (K, Belief.SIZE), epsilon,
+    data, slot numbers (K, 3), with ``given`` beliefs (K, 4): the weight w last) -> rows (None for
+    ``"free"``) and, with ``value``, ``risk_value`` (ego, beliefs, data, slot numbers) -> R (None for
+    ``"free"`` or without ``value``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
     w_c1, w_c2, w_th, _ = sc.cost_weights
@@ -158,8 +162,8 @@ def stage_functions(
     if form != "free":
         ego_s, belief_s = ca.SX.sym("ego", 4), ca.SX.sym("belief", slots * Belief.SIZE)
         eps_s, data_s = ca.SX.sym("epsilon"), ca.SX.sym("data", *data_shape(risk_shape, slots))
-        slot_s = ca.SX.sym("slots", slots, 3)
-        numbers = slot_s if slots > 1 else ca.horzcat(ca.DM.ones(1, 1), slot_s[:, 1:])
+        slot_s = ca.SX.sym("slots", slots, NUMBER_COLUMNS + int(given))
+        numbers = slot_s if slots > 1 or given else ca.horzcat(ca.DM.ones(1, 1), slot_s[:, 1:])
         size = Belief.SIZE
         beliefs = [Belief.from_array(belief_s[k * size : (k + 1) * size]) for k in range(slots)]
         rows = margin(ego_s, beliefs, eps_s, data_s, numbers, form == "zero")
@@ -191,6 +195,7 @@ def assemble(
     soft_penalty: float | None = None,
     terms: tuple[bool, bool] = (False, False),
     slots: int = 1,
+    given: bool = False,
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
     """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
     called) for ``slots`` object slots, its :data:`Layout` and one object's beliefs' function
@@ -198,7 +203,10 @@ def assemble(
     soften the risk rows with slacks (one per stage, tagged ``(n, "s", 0)``, shared by the stage's
     rows) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight): the :data:`TERMS`
     parameters at the end of p, and (with a ``risk_value`` stage function) the episode budget's
-    accumulator and row, the weighted risk in the objective (see the module)."""
+    accumulator and row, the weighted risk in the objective (see the module). ``given``: the slots'
+    beliefs at n = 1..N and their weights are parameters (:func:`~agents.mpc.nlp.parameters.given_vector`,
+    at the very end of p: any predictor's modes), not the constant-input prediction from each
+    slot's measurement."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
@@ -215,8 +223,11 @@ def assemble(
     with_terms = any(terms)
     p_terms = sym.sym("risk_terms", TERMS) if with_terms else None
     extra = [p_terms] if with_terms else []
-    p = ca.vertcat(p_eps, p_vref, *p_slots, *(ca.vec(d) for d in p_data), *extra)
+    p_given = [sym.sym(f"given_{k}", given_size(N)) for k in range(slots)] if given else []
+    p = ca.vertcat(p_eps, p_vref, *p_slots, *(ca.vec(d) for d in p_data), *extra, *p_given)
     slot_numbers = ca.horzcat(*(q[5:8] for q in p_slots)).T  # (K, 3): active, distance, mass
+    if given:  # (K, 4): and the weight
+        slot_numbers = ca.horzcat(slot_numbers, ca.vertcat(*(q[0] for q in p_given)))
     fields = [f.name for f in dataclasses.fields(Belief)]
 
     def stack(measurement: Any, numbers: Any) -> list[Any]:
@@ -224,6 +235,12 @@ def assemble(
         return [ca.vertcat(*(getattr(b, k) for k in fields)) for b in bs]
 
     per_slot = [stack(q[0:5], q[8 : 8 + n_unc]) for q in p_slots]
+    if given:  # n = 0 keeps the measured belief (unused by the rows); n >= 1 the given ones
+        size = Belief.SIZE
+        per_slot = [
+            [b[0]] + [q[1 + (n - 1) * size : 1 + n * size] for n in range(1, N + 1)]
+            for b, q in zip(per_slot, p_given, strict=True)
+        ]
     stacked = [ca.vertcat(*(b[n] for b in per_slot)) for n in range(N + 1)]
     q_obj, q_unc = sym.sym("object", 5), sym.sym("uncertainty", n_unc)
     belief_fn = ca.Function("beliefs", [q_obj, q_unc], [ca.horzcat(*stack(q_obj, q_unc)).T])

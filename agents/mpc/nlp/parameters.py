@@ -10,11 +10,15 @@ from typing import Any
 
 import numpy as np
 
+from risk_env.prediction.belief import Belief
 from risk_env.scenario.scenario import Scenario
 
 SLOT_SIZE = 5 + 3 + 13
 """Parameters per object slot: measurement (5), active, collision distance [m], mass [kg],
 uncertainty numbers (13)."""
+NUMBER_COLUMNS = 3
+"""Columns of the slots' numbers the risk rows read: active flag, collision distance r_e + r_o [m],
+object mass [kg]; with given beliefs a fourth, the mode's weight w."""
 INACTIVE = 1e3
 """Margin units added to an inactive slot's rows (so they hold, whatever the slot's numbers)."""
 TERMS = 5
@@ -83,3 +87,16 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
         out[name] = tuple(p[i + k] for k in range(length))
         i += length
     return SimpleNamespace(**out)
+
+
+def given_size(horizon: int) -> int:
+    """Parameters per slot of given beliefs: the weight w and the belief fields at n = 1..N."""
+    return 1 + horizon * Belief.SIZE
+
+
+def given_vector(weights: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+    """The given beliefs' block at the end of p: per slot k its weight ``weights[k]`` and its
+    belief fields at n = 1..N, ``beliefs (K, N, Belief.SIZE)`` (``Belief.as_array`` order)."""
+    weights = np.asarray(weights, float)
+    beliefs = np.asarray(beliefs, float)
+    return np.concatenate([np.concatenate([[w], b.ravel()]) for w, b in zip(weights, beliefs, strict=True)])

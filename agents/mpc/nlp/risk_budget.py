@@ -1,7 +1,19 @@
 """The SMPC's episode risk budget and its risk weight: checks, the per-step bound a budget implies,
 and the solver parameters of both (the NLP's rows are in :mod:`agents.mpc.nlp.ocp`).
 
-**The budget** ``risk_budget=B`` [the severity's unit, per episode]. At step k the plan must satisfy
+**The budget** ``risk_budget=B`` [the severity's unit, per episode], spent in one of two ways
+(:data:`ALLOCATIONS`).
+
+*A share of what is left* (``"share"``, default). Step k's risk rows get the tolerance
+``epsilon_k = min(epsilon, alpha (B - spent_k))`` with alpha = ``budget_share`` in (0, 1]: every
+stage of the plan, R_{n|k} <= epsilon_k, the paper's per-step constraint at a level the episode
+sets. *Why it holds.* The step taken adds R_{1|k} <= epsilon_k <= alpha (B - spent_k), so
+B - spent_{k+1} >= (1 - alpha)(B - spent_k) >= 0: the episode's summed risk stays within B (and
+with alpha < 1 never exhausts it). The plan charges the step what it realises, R_{1|k}, and
+re-plans the rest: the later stages' risk, foreseen with the horizon's growing uncertainty, is
+never realised as foreseen, and is not paid for in advance.
+
+*The whole horizon* (``"horizon"``). At step k the plan must satisfy
 
     spent_k + sum_{n=1..N} R_{n|k} <= B,
 
@@ -58,6 +70,32 @@ import numpy as np
 
 from agents.mpc.nlp.parameters import TERMS
 from risk_env import checks
+
+ALLOCATIONS: tuple[str, ...] = ("share", "horizon")
+"""How an SMPC spends its episode budget: ``"share"`` (default), each step may spend a share alpha
+of what is left; ``"horizon"``, each plan fits its whole horizon's risk into what is left."""
+BUDGET_SHARE = 0.5
+"""alpha by default: a step may spend half of what is left of the budget."""
+
+
+def check_allocation(value: Any) -> str:
+    """``budget_allocation``: one of :data:`ALLOCATIONS`."""
+    if value not in ALLOCATIONS:
+        raise ValueError(f"budget_allocation must be one of {ALLOCATIONS}, got {value!r}")
+    return value
+
+
+def check_share(value: Any) -> float:
+    """``budget_share`` alpha: a number in (0, 1]."""
+    share = _nonnegative(value, "budget_share", "the share of the budget left a step may spend")
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f"budget_share must lie in (0, 1], got {value!r}")
+    return share
+
+
+def share_tolerance(epsilon: float, budget: float, spent: float, share: float) -> float:
+    """The step's tolerance under ``"share"``: ``min(epsilon, alpha (B - spent))``, at least 0."""
+    return max(0.0, min(epsilon, share * (budget - spent)))
 
 
 def check_budget(value: Any, name: str = "risk_budget") -> float | None:

@@ -262,17 +262,18 @@ def build_problem(
     value: RiskValue | None = None,
     terms: tuple[bool, bool] = (False, False),
     slots: int = 1,
+    given: bool = False,
 ) -> Problem:
     """Build the NLP of :mod:`agents.mpc.nlp.ocp` for ``variant`` with ``slots`` object slots and its
     solver (compiled with ``settings.jit`` where a C compiler works); ``value`` and ``terms``: the
     risk budget and weight (:func:`agents.mpc.nlp.ocp.assemble`)."""
     t0 = time.perf_counter()
     N = scenario.horizon
-    stages = stage_functions(scenario, variant, margin, risk_shape, value, slots)
+    stages = stage_functions(scenario, variant, margin, risk_shape, value, slots, given)
     # the NLP in SX, every stage function inlined (what the solver runs uncompiled)
     penalty = settings.soft_penalty if variant.endswith(SOFT) else None
     nlp, (w_tags, g_tags, lbg, ubg), belief_fn = assemble(
-        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots
+        ca.SX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots, given
     )
 
     base: dict[str, Any] = {"expand": True, "print_time": False, "error_on_fail": False}
@@ -286,7 +287,9 @@ def build_problem(
         # the same NLP in MX, the stage functions called rather than inlined: the generated C
         # code holds the risk row and its derivatives once instead of N times; every rung loads
         # the one library, whose compiled "nlp" leaves nothing to expand
-        calls, *_ = assemble(ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots)
+        calls, *_ = assemble(
+            ca.MX, scenario, stages, risk_shape, settings.stage_cost, penalty, terms, slots, given
+        )
         base["expand"] = False
         library = compiled_library(
             calls,
