@@ -11,6 +11,7 @@ COMMANDS: dict[str, str] = {
     "env_speed": "one RiskCrossing-v0 step beside Gymnasium's CartPole-v1 and Pendulum-v1",
     "vector_speed": "the batched RiskCrossing-v0's throughput beside Gymnasium's envs",
     "highway_intersection": "our agents drive highway-env's intersection against its IDM",
+    "highway_frontier": "the intersection's frontier: goal rate against collision rate, the IDM beside",
     "highway_render": "pictures through highway-env's graphics: the paper's episode, an intersection",
     "train_ppo": "train the PPO baseline (stable-baselines3) with a risk cost",
     "ppo_study": "short PPO runs behind the reward weights and the prediction features",

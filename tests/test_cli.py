@@ -151,6 +151,7 @@ SMALLEST = {
     "env_speed": {"--steps": "1", "--repeat": "1", "--batch": "1"},
     "vector_speed": {"--steps": "1", "--repeats": "1", "--num-envs": "1"},
     "highway_intersection": {"--episodes": "1", "--workers": "1"},
+    "highway_frontier": {"--episodes": "1", "--workers": "1"},
     "highway_render": {"--max-steps": "2"},
     "train_ppo": {
         "--total-timesteps": "64",
@@ -235,6 +236,7 @@ NUMBERS = {
     "finite_float": ["nan", "inf", "-inf", "x", ""],
     "unit_interval_closed": ["-0.1", "1.5", "nan", "x"],
     "discount": ["0", "2", "-1", "nan", "x"],
+    "fraction": ["0", "1.5", "-0.5", "nan", "x"],
     "time_cap": ["0", "-1", "nan", "x", ""],
 }
 """Bad values of each checked ``type=`` of :mod:`benchmarks.cli`."""

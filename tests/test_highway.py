@@ -244,7 +244,7 @@ def test_intersection_v1_stays_selectable():
 def test_crash_kind_from_the_closing_speeds():
     from types import SimpleNamespace
 
-    from benchmarks.highway_intersection import crash_kind
+    from benchmarks.highway_episodes import crash_kind
 
     ego = SimpleNamespace(position=np.array([0.0, 0.0]), crashed=True)
     other = SimpleNamespace(position=np.array([4.0, 0.0]), crashed=True)
@@ -400,9 +400,8 @@ def test_highway_benchmarks_run_small(tmp_path):
 
     from benchmarks import highway_intersection, highway_render
 
-    summary = highway_intersection.main(
-        ["--episodes", "1", "--agents", "rmpc,idm", "--workers", "1", "--out", str(tmp_path)]
-    )
+    tiny = ["--episodes", "1", "--duration", "3", "--predictor", "constant", "--slots", "2", "--workers", "1"]
+    summary = highway_intersection.main([*tiny, "--agents", "rmpc,idm", "--out", str(tmp_path)])
     assert [s["agent"] for s in summary] == ["rmpc:worst_case", "idm"]
     for s in summary:
         assert s["episodes"] == 1 and s["collision_rate"] + s["goal_rate"] + s[
