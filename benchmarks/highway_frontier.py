@@ -22,10 +22,10 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from benchmarks import cli
+from benchmarks import cli, highway_intersection
 from benchmarks.agent_names import parse_agent
 from benchmarks.highway_agents import KINDS
-from benchmarks.highway_intersection import add_options, parse_args, run
+from benchmarks.highway_intersection import add_options, run
 from benchmarks.highway_tables import markdown, write_csvs
 
 AGENTS = "rmpc,smpc:budget=0.01,smpc:budget=0.02,smpc:budget=0.05,smpc:budget=0.1,idm"
@@ -45,6 +45,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = cli.parser("highway_frontier", __doc__)
     add_options(parser, AGENTS, "lane,constant", Path("results/highway/frontier"))
     return parser
+
+
+def parse_args(
+    argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None
+) -> argparse.Namespace:
+    """The options, checked as :func:`benchmarks.highway_intersection.parse_args` checks them."""
+    return highway_intersection.parse_args(argv, parser or build_parser())
 
 
 def _rate(s: dict[str, Any], key: str) -> tuple[float, float, float]:

@@ -192,11 +192,17 @@ def check_duration(parser: argparse.ArgumentParser, duration: float, flag: str) 
         parser.error(f"argument {flag}: {duration:g} s is shorter than one step ({step:g} s)")
 
 
+def plan_runs(agents: list[str], predictors: list[str]) -> list[tuple[str, str]]:
+    """The runs ``(agent, predictor)`` of a command: each MPC with each predictor, in the order
+    given, the IDM once (predictor ``""``)."""
+    return [(name, p) for name in agents for p in (predictors if name != "idm" else [""])]
+
+
 def run(args: argparse.Namespace, out: Any) -> tuple[list[dict[str, Any]], list[dict[str, Any]], float]:
     """Every agent's episodes (each MPC with each predictor, the IDM once) in the output set
     ``out``'s chunk store: the summary rows, the episode rows and the wall time [s]."""
     seeds = list(range(args.seed, args.seed + args.episodes))
-    runs = [(name, p) for name in args.agents for p in (args.predictor if name != "idm" else [""])]
+    runs = plan_runs(args.agents, args.predictor)
     jobs = [(name, p, seeds[i : i + CHUNK], args) for name, p in runs for i in range(0, len(seeds), CHUNK)]
     t0 = time.perf_counter()
     chunks = run_sweep(run_chunk, jobs, workers=args.workers, desc=args.env, store=out.store)

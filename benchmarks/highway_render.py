@@ -260,11 +260,11 @@ def parse_args(
     args.agent = str(args.agent[0])
     if len(args.intersection_agent) != 1:
         parser.error("argument --intersection-agent: one agent, not a list")
-    from benchmarks.highway_agents import resolve
+    from benchmarks.highway_agents import DEFAULT_BUDGET, resolve
     from benchmarks.highway_intersection import check_duration
 
     try:
-        args.intersection_agent = resolve(args.intersection_agent[0], "probability", 0.05).name
+        args.intersection_agent = resolve(args.intersection_agent[0], "probability", DEFAULT_BUDGET).name
     except ValueError as error:
         parser.error(f"argument --intersection-agent: {error}")
     check_duration(parser, args.intersection_duration, "--intersection-duration")

@@ -72,6 +72,20 @@ def test_what_each_agent_name_means_at_the_intersection():
     assert resolve("smpc:budget=2", "injury", 0.05).budget == 2.0
 
 
+def test_each_mpc_runs_with_each_predictor_the_idm_once():
+    runs = highway_intersection.plan_runs(
+        ["rmpc:worst_case", "idm", "smpc:exact:budget=0.05"], ["lane", "constant"]
+    )
+    assert runs == [
+        ("rmpc:worst_case", "lane"),
+        ("rmpc:worst_case", "constant"),
+        ("idm", ""),
+        ("smpc:exact:budget=0.05", "lane"),
+        ("smpc:exact:budget=0.05", "constant"),
+    ]
+    assert highway_frontier.parse_args([]).predictor == ["lane", "constant"]
+
+
 def test_the_options_reach_the_mpcs():
     argv = ["--mode-threshold", "0.2", "--budget-share", "0.25", "--max-solve-time", "inf", "--slots", "2"]
     args = highway_intersection.parse_args(argv)
