@@ -143,7 +143,7 @@ def verdicts(summary: list[dict[str, Any]]) -> str:
         return ""
     lines = [
         "",
-        "Beats the IDM on both axes (goal rate at least its, fewer collisions; point estimates):",
+        "Beats the IDM on both axes (a goal rate at least the IDM's, fewer collisions; point estimates):",
         "",
     ]
     for s in summary:
