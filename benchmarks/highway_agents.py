@@ -108,6 +108,31 @@ def resolve(agent: AgentName | str, severity: str, budget: float) -> HighwayAgen
     return HighwayAgent("smpc", a.variant, sev, tolerance, spent)
 
 
+def built_problems() -> frozenset[Any]:
+    """The keys of the MPCs' process-wide cache of built NLPs
+    (:func:`agents.mpc.nlp.solver.cached_problem`)."""
+    from agents.mpc.nlp import solver
+
+    return frozenset(getattr(solver, "_SOLVER_CACHE", {}))
+
+
+class Builder:
+    """Builds the adapter's agents with ``factory`` and keeps the keys of the NLPs their
+    construction built (:attr:`built`), so that a step's own builds can be told apart: an MPC
+    builds each size of its problem when a step first needs it (with a predictor's modes as
+    parameters), inside the step's solve time."""
+
+    def __init__(self, factory: Any) -> None:
+        self.factory = factory
+        self.built: set[Any] = set()
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        before = built_problems()
+        agent = self.factory(*args, **kwargs)
+        self.built |= built_problems() - before
+        return agent
+
+
 def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any:
     """The driver of ``agent`` for ``env``: the IDM, or the MPC through
     :class:`risk_env.highway.IntersectionAdapter` with ``predictor`` and the options of ``args``
@@ -126,7 +151,7 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
             options |= {"risk_budget": agent.budget, "budget_share": args.budget_share}
     return IntersectionAdapter(
         env,
-        functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options),
+        Builder(functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options)),
         uncertainty=args.uncertainty,
         severity=agent.severity or args.severity,
         slots=args.slots,

@@ -3,8 +3,9 @@
 :func:`run_chunk` runs a pool job (an agent, a predictor, some seeds) and keeps its env and driver
 in the process between jobs; :func:`run_episode` drives one seeded episode and returns its row:
 the outcome (collision and its kind, goal, timeout, deadlock) and per-step arrays (the scored risk,
-each MPC step's wall and CPU time, whether every object slot was occupied) with the episode risk
-an SMPC with a budget spent by its own estimator.
+each MPC step's wall and CPU time, whether every object slot was occupied, whether the step built
+an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`) with the episode risk an SMPC
+with a budget spent by its own estimator.
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
@@ -25,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.highway_agents import make_driver, resolve
+from benchmarks.highway_agents import built_problems, make_driver, resolve
 
 ENV_DEFAULTS: dict[str, float] = {"duration": 13.0, "spawn_probability": 0.6, "initial_vehicle_count": 10}
 """highway-env's own values of the intersection options the commands set (``duration`` [s],
@@ -97,16 +98,19 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     if hasattr(driver, "reset"):
         driver.reset()
     base = env.unwrapped
-    risks, walls, cpus, full = [], [], [], []
+    risks, walls, cpus, full, builds = [], [], [], [], []
     times, speeds = [float(base.time)], [float(base.vehicle.speed)]
     done, kind = False, ""
     while not done:
+        known = built_problems()
         action, _ = driver.predict(obs)
         reports = [r for r in getattr(driver, "last_solves", []) if r is not None]
         if reports:
             walls.append(sum(r.solve_time for r in reports))
             cpus.append(sum(r.cpu_time for r in reports))
             full.append(len(driver.last_objects) >= slots)
+            constructed = getattr(getattr(driver, "make_agent", None), "built", set())
+            builds.append(bool(built_problems() - known - constructed))
         before = _states(base)
         obs, _, terminated, truncated, info = env.step(action)
         risks.append(info["risk"])
@@ -135,6 +139,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "solve_times": np.array(walls),
         "cpu_times": np.array(cpus),
         "full": np.array(full, dtype=bool),
+        "built": np.array(builds, dtype=bool),
         "mpc_steps": len(walls),
         "fallbacks": int(getattr(driver, "failures", 0)),
         "spent_risk": float(spent),

@@ -2,8 +2,10 @@
 
 Rates carry Wilson 95 % intervals (:func:`benchmarks.sampled_rows.wilson`). Solve times are per
 MPC step, CPU time (``SolveReport.cpu_time``: the step's own work, whatever else the machine
-runs) beside wall time. The realised episode risk of an SMPC with a budget is what it spent by its
-own estimator (``spent_risk()`` at the episode's end), set against its budget B.
+runs) beside wall time, over the steps that built no NLP (an MPC builds each size of its problem
+when a step first needs it: those steps are counted apart, ``build_steps``). The realised episode
+risk of an SMPC with a budget is what it spent by its own estimator (``spent_risk()`` at the
+episode's end), set against its budget B.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout",
 EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
     "vehicle_into_ego", "goal", "timeout", "deadlock", "final_speed", "risk_mean", "fallbacks",
-    "spent_risk", "solve_ms_median", "cpu_ms_median",
+    "spent_risk", "solve_ms_median", "cpu_ms_median", "build_steps",
 )  # fmt: skip
 """The columns of the per-episode CSV."""
 
@@ -40,9 +42,10 @@ def summarise(
     """One agent's (and predictor's) row of the summary, from its episodes ``rows``."""
     agent = resolve(name, args.severity, args.budget)
     n = len(rows)
-    wall = np.concatenate([r["solve_times"] for r in rows]) * 1e3
-    cpu = np.concatenate([r["cpu_times"] for r in rows]) * 1e3
-    full = np.concatenate([r["full"] for r in rows]) if wall.size else np.zeros(0, bool)
+    built = np.concatenate([r["built"] for r in rows]).astype(bool)
+    wall = np.concatenate([r["solve_times"] for r in rows])[~built] * 1e3
+    cpu = np.concatenate([r["cpu_times"] for r in rows])[~built] * 1e3
+    full = np.concatenate([r["full"] for r in rows])[~built] if wall.size else np.zeros(0, bool)
     goals = [r["time_s"] for r in rows if r["goal"]]
     risk = np.concatenate([r["risk_steps"] for r in rows])
     out: dict[str, Any] = {"agent": name, "predictor": predictor, "label": agent.label, "episodes": n}
@@ -69,7 +72,7 @@ def summarise(
             f"full_{kind}_ms_median": _stat(times[full], 50),
             f"full_{kind}_ms_p95": _stat(times[full], 95),
         }
-    out["full_steps"] = int(full.sum())
+    out |= {"full_steps": int(full.sum()), "build_steps": int(built.sum())}
     return out | budget_columns(agent.budget, rows)
 
 
@@ -149,8 +152,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         "| agent | fallback steps (share of steps; episodes with any) | episode risk: budget B, mean /"
         " max, episodes over B (with a fallback) | solve CPU ms median / p95 / max | solve wall ms"
         f" median / p95 / max | CPU ms, all {args.slots} slots occupied: median / p95 (steps) |"
-        " risk per step (scored) |",
-        "| " + " | ".join(["---"] * 7) + " |",
+        " steps that built an NLP (not timed) | risk per step (scored) |",
+        "| " + " | ".join(["---"] * 8) + " |",
     ]
     for s in mpcs:
         fb = f"{s['fallbacks']} ({100 * s['fallback_share']:.2f}%; {s['episodes_with_fallback']})"
@@ -167,7 +170,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         full = f"{_f(s['full_cpu_ms_median'])} / {_f(s['full_cpu_ms_p95'])} ({s['full_steps']})"
         lines.append(
             f"| {_who(s)} | {fb} | {spent} | {times['cpu']} | {times['solve']} | {full} |"
-            f" {s['risk_mean']:.3g} |"
+            f" {s['build_steps']} | {s['risk_mean']:.3g} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -182,8 +185,7 @@ def write_csvs(folder: Path, prefix: str, summary: list[dict[str, Any]], rows: l
         writer = csv.DictWriter(f, fieldnames=list(EPISODE_FIELDS))
         writer.writeheader()
         for r in rows:
-            medians = {
-                f"{k}_ms_median": float(np.median(r[f"{k}_times"])) * 1e3 if r[f"{k}_times"].size else ""
-                for k in ("solve", "cpu")
-            }
+            timed = {f"{k}_ms_median": r[f"{k}_times"][~r["built"]] for k in ("solve", "cpu")}
+            medians = {k: 1e3 * float(np.median(t)) if t.size else "" for k, t in timed.items()}
+            medians["build_steps"] = int(r["built"].sum())
             writer.writerow({k: r[k] for k in EPISODE_FIELDS if k not in medians} | medians)

@@ -91,7 +91,7 @@ def test_the_options_reach_the_mpcs():
     args = highway_intersection.parse_args(argv)
     env = make_env(args, "constant")
     smpc = make_driver(resolve("smpc", "probability", 0.03), env, args, "constant")
-    assert smpc.make_agent.keywords == {
+    assert smpc.make_agent.factory.keywords == {
         "risk": "exact",
         "mode_threshold": 0.2,
         "max_solve_time": math.inf,
@@ -101,7 +101,7 @@ def test_the_options_reach_the_mpcs():
     }
     assert smpc.slots == 2 and smpc.base_scenario.severity == "probability"
     rmpc = make_driver(resolve("rmpc", "probability", 0.03), env, args, "constant")
-    assert "risk_budget" not in rmpc.make_agent.keywords
+    assert "risk_budget" not in rmpc.make_agent.factory.keywords
 
 
 def test_the_adapter_sums_what_its_lane_agents_spent():
@@ -136,6 +136,7 @@ def test_an_episode_records_every_column(tmp_path):
         assert 0 < s["cpu_ms_median"] <= s["cpu_ms_p95"] <= s["cpu_ms_max"]
         assert 0 < s["solve_ms_median"] <= s["solve_ms_max"]
         assert s["fallback_share"] == pytest.approx(s["fallbacks"] / 3)
+        assert s["build_steps"] == 0  # the paper's predictor: every NLP is built with the agent, untimed
     smpc = rows["smpc:exact:budget=0.05"]
     assert smpc["budget"] == 0.05 and 0.0 <= smpc["spent_mean"] <= smpc["spent_max"]
     assert smpc["over_budget"] == int(smpc["spent_max"] > 0.05)
@@ -146,6 +147,33 @@ def test_an_episode_records_every_column(tmp_path):
     assert "| deadlocks |" in text and "duration 1.5 s" in text
     episodes = (tmp_path / "intersection_episodes.csv").read_text().splitlines()
     assert len(episodes) == 4 and "deadlock" in episodes[0] and "cpu_ms_median" in episodes[0]
+    assert "steps that built an NLP" in text
+
+
+def test_a_step_that_builds_an_nlp_is_timed_apart(monkeypatch):
+    from collections import OrderedDict
+
+    from agents.mpc.nlp import solver
+    from benchmarks.highway_episodes import run_episode
+
+    cache: OrderedDict = OrderedDict()
+    monkeypatch.setattr(solver, "_SOLVER_CACHE", cache)
+
+    class Driver:  # builds its agent at step 1 (untimed), an NLP of a new size at step 2
+        destination, last_objects = "o1", np.zeros((0, 5))
+        make_agent = SimpleNamespace(built={"the agent's own"})
+        last_solves = [SimpleNamespace(solve_time=0.02, cpu_time=0.01)]
+        steps = 0
+
+        def predict(self, observation):
+            self.steps += 1
+            cache.setdefault({1: "the agent's own", 2: "a new size"}.get(self.steps, "the agent's own"))
+            return np.zeros(2, dtype=np.float32), None
+
+    args = highway_intersection.parse_args(["--duration", "1.5", "--initial-vehicles", "0"])
+    row = run_episode(Driver(), make_env(args, "constant"), seed=0, slots=1)
+    assert row["built"].tolist() == [False, True, False]
+    assert row["cpu_times"].tolist() == [0.01] * 3
 
 
 def test_deadlocks_from_a_synthetic_record():
