@@ -10,6 +10,7 @@ COMMANDS: dict[str, str] = {
     "timing": "the MPCs' solve time per step, fallbacks and real-time margin in the paper's loop",
     "env_speed": "one RiskCrossing-v0 step beside Gymnasium's CartPole-v1 and Pendulum-v1",
     "vector_speed": "the batched RiskCrossing-v0's throughput beside Gymnasium's envs",
+    "exact_accuracy": "the exact risk against adaptive quadrature on random beliefs up to 1:1000",
     "highway_intersection": "our agents drive highway-env's intersection against its IDM",
     "highway_frontier": "the intersection's frontier: goal rate against collision rate, the IDM beside",
     "highway_render": "pictures through highway-env's graphics: the paper's episode, an intersection",

@@ -88,6 +88,17 @@ def positive(name: str, value: Any, strict: bool = True) -> float:
     return out
 
 
+def within_severity(name: str, value: float, severity: str, bound: float, unit: str) -> float:
+    """``value`` if it is at most ``bound``, the largest per-step risk of the severity named
+    ``severity`` [``unit``]; else ``ValueError`` naming it (a tolerance above it is in another unit)."""
+    if value > bound:
+        raise ValueError(
+            f"{name} {value:g} exceeds {bound:g}, the largest per-step risk of the {severity!r} severity"
+            f" [{unit}]: give it in that severity's own unit"
+        )
+    return value
+
+
 def finite_reals(name: str, value: Any, length: int) -> tuple[float, ...]:
     """:func:`reals`, each entry finite; errors name ``name[i]``."""
     out = reals(name, value, length)

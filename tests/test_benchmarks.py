@@ -122,6 +122,7 @@ def test_process_pool_keeps_order():
     assert run_sweep(_square, list(range(7)), workers=2) == [x * x for x in range(7)]
 
 
+@pytest.mark.slow  # starting ray costs more than the sweep; test_process_pool_keeps_order is the fast one
 def test_ray_sweep_matches_the_process_pool():
     pytest.importorskip("ray")
     specs = table2.specs_for(["rmpc:worst_case"], ["low"], [0.0, 2500.0], {"max_steps": 6})

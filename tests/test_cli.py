@@ -150,6 +150,7 @@ SMALLEST = {
     "timing": {"--steps": "1", "--uncertainty": "low", "--tolerances": "0"},
     "env_speed": {"--steps": "1", "--repeat": "1", "--batch": "1"},
     "vector_speed": {"--steps": "1", "--repeats": "1", "--num-envs": "1"},
+    "exact_accuracy": {"--beliefs": "20"},
     "highway_intersection": {"--episodes": "1", "--workers": "1"},
     "highway_frontier": {"--episodes": "1", "--workers": "1"},
     "highway_render": {"--max-steps": "2"},

@@ -82,7 +82,10 @@ def test_bad_weights_are_named(weights, match) -> None:
 def test_bad_spreads_and_lengths_are_named() -> None:
     scenario = Scenario.preset("low")
     b = _beliefs(scenario)
-    bad = Belief.from_array(b.as_array() * np.where(np.arange(b.as_array().shape[-1]) == 4, -1.0, 1.0))
+    negative = b.as_array() * np.where(np.arange(b.as_array().shape[-1]) == 4, -1.0, 1.0)
+    with pytest.raises(ValueError, match=r"Belief.sigma_x must be finite and >= 0"):
+        Belief.from_array(negative)  # a Belief of numbers checks itself
+    bad = Belief.unchecked(**dict(vars(Belief.from_array(np.abs(negative))), sigma_x=negative[..., 4]))
     with pytest.raises(ValueError, match=r"modes\[1\].beliefs.sigma_x must be finite and >= 0"):
         Mixture((Mode(0.5, b), Mode(0.5, bad)))
     short = Belief.from_array(b.as_array()[:3])

@@ -45,19 +45,21 @@ def test_features_are_in_the_egos_frame() -> None:
 def _features_before(obs: np.ndarray) -> np.ndarray:
     """:func:`agents.ppo.policy.features` as it was before the object slots, on the old 15-entry layout
     (ego pose 0..2, input 3..4, object 5..9, lambda 10, path error 11..14): the shipped policies
-    were trained on exactly these numbers."""
+    were trained on these numbers (here sin, cos and hypot entry by entry from ``math``, as the
+    features now take them to be the same on every CPU)."""
+    cos, sin, hypot = (np.vectorize(f, otypes=[float]) for f in (math.cos, math.sin, math.hypot))
     o = np.atleast_2d(np.asarray(obs, dtype=float))
     x, y, theta = (o[:, i] for i in range(3))
     v, omega = o[:, 3], o[:, 4]
     ox, oy, otheta, ov = (o[:, i] for i in (5, 6, 7, 8))
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = cos(theta), sin(theta)
     dx, dy = ox - x, oy - y
     rel_heading = otheta - theta
-    vx = ov * np.cos(rel_heading) - v
-    vy = ov * np.sin(rel_heading)
+    vx = ov * cos(rel_heading) - v
+    vy = ov * sin(rel_heading)
     raw = np.stack(
-        (*(o[:, 11:15].T), v, omega, c * dx + s * dy, -s * dx + c * dy, np.cos(rel_heading))
-        + (np.sin(rel_heading), vx, vy, np.hypot(dx, dy), o[:, 10]),
+        (*(o[:, 11:15].T), v, omega, c * dx + s * dy, -s * dx + c * dy, cos(rel_heading))
+        + (sin(rel_heading), vx, vy, hypot(dx, dy), o[:, 10]),
         axis=-1,
     )
     scale = np.array([5.0, 5.0, 1.0, 4.0, 4.0, 0.8, 20.0, 20.0, 1.0, 1.0, 8.0, 8.0, 20.0, 100.0])
@@ -100,8 +102,7 @@ def test_shipped_policies_see_what_they_saw_before_the_object_slots(name: str) -
     seen = np.concatenate(
         [_features_before(old), agent.spec(obs, agent.context.array())[:, FEATURES:]], axis=1
     )
-    action, _ = agent.model.predict(seen, deterministic=True)
-    expected = to_inputs(action, old[:, 3:5], agent.limits)
+    expected = to_inputs(np.clip(agent.policy(seen), -1.0, 1.0), old[:, 3:5], agent.limits)
     np.testing.assert_array_equal(agent.predict(obs)[0], expected)
     # a second slot (absent, or a second object) changes nothing: the policy reads the first object
     two = np.concatenate([obs, np.zeros((len(obs), observation.SLOT_SIZE), dtype=np.float32)], axis=1)
@@ -145,9 +146,18 @@ def test_sb3_view_reports_episode_cost_and_terminal_observation() -> None:
         SB3VecEnv(gym.make_vec(risk_env.ENV_ID, num_envs=2))
 
 
-def _train(tmp_path: Path, *flags: str) -> dict:
+def _train(tmp_path: Path, *flags: str, steps: int = 1024) -> dict:
+    """Train in a subprocess for ``steps`` env steps (8 copies, rollouts of 64 steps each)."""
     out = tmp_path / "ppo"
-    command = [sys.executable, "-m", "benchmarks.train_ppo", "--out", str(out), "--total-timesteps", "1024"]
+    command = [
+        sys.executable,
+        "-m",
+        "benchmarks.train_ppo",
+        "--out",
+        str(out),
+        "--total-timesteps",
+        str(steps),
+    ]
     command += ["--num-envs", "8", "--n-steps", "64", "--batch-size", "256", "--no-progress-bar", *flags]
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
@@ -156,8 +166,14 @@ def _train(tmp_path: Path, *flags: str) -> dict:
 
 
 def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
-    meta = _train(tmp_path, "--checkpoint-every", "512")
+    """One short training (the prediction features, the Lagrangian): saved, loaded, acting; told
+    epsilon and the level of the scenario it is loaded for, in the severity it was trained with.
+    The cost is above the limit, so beta grows by dual ascent (two rollouts, one update each)."""
+    lagrangian = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
+    meta = _train(tmp_path, "--checkpoint-every", "512", "--prediction", *lagrangian)
     assert meta["timesteps"] >= 1024 and meta["steps_per_s"] > 0
+    assert meta["final_rollout"]["beta"] > 2.0 + 1.0  # each update adds dual_lr (cost - limit) >= 1
+    assert meta["features"] == FeatureSpec(prediction=True).size
     assert list((tmp_path / "ppo" / "model_checkpoints").glob("model_*_steps.zip"))
     agent = PPOAgent.load(tmp_path / "ppo" / "model.zip")
     assert agent.metadata["args"]["num_envs"] == 8
@@ -167,13 +183,26 @@ def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
     assert agent.predict(np.stack([obs] * 3))[0].shape == (3, 2)
     with pytest.raises(ValueError, match="non-finite"):
         agent.predict(np.full(observation.SIZE, np.nan))
+    env = gym.make(risk_env.ENV_ID, uncertainty="high", risk_tolerance=1500.0)
+    agent = PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=env.unwrapped.scenario)
+    assert agent.context == Context(1500.0, env.unwrapped.scenario.uncertainty)
+    assert agent.predict(env.reset(seed=0)[0])[0].shape == (2,)
+    other = gym.make(risk_env.ENV_ID, severity="probability", risk_tolerance=0.1)
+    with pytest.raises(ValueError, match="severity"):
+        PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
 
 
-def test_lagrangian_moves_beta_toward_the_cost_limit(tmp_path: Path) -> None:
-    up = _train(tmp_path / "up", "--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
-    assert up["final_rollout"]["beta"] > 2.0  # cost above the limit: the penalty grows
-    down = _train(tmp_path / "down", "--lagrangian", "--cost-limit", "1e9", "--risk-weight", "2")
-    assert down["final_rollout"]["beta"] == 0.0  # far below the limit: the penalty vanishes
+@pytest.mark.slow  # test_train_save_load_predict_in_a_subprocess trains with the same flags
+def test_lagrangian_raises_beta_above_the_cost_limit(tmp_path: Path) -> None:
+    """One rollout (beta moves after every rollout): the cost is above the limit, the penalty grows."""
+    flags = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
+    assert _train(tmp_path, *flags, steps=512)["final_rollout"]["beta"] > 2.0
+
+
+@pytest.mark.slow
+def test_lagrangian_drops_beta_to_zero_far_below_the_cost_limit(tmp_path: Path) -> None:
+    flags = ("--lagrangian", "--cost-limit", "1e9", "--risk-weight", "2")
+    assert _train(tmp_path, *flags, steps=512)["final_rollout"]["beta"] == 0.0  # clipped at 0
 
 
 def test_load_errors(tmp_path: Path) -> None:
@@ -242,18 +271,6 @@ def test_policy_view_reward_terms_and_epsilon_per_episode() -> None:
     assert ended >= 6
 
 
-def test_agent_reads_epsilon_and_level_from_the_scenario(tmp_path: Path) -> None:
-    meta = _train(tmp_path, "--prediction")
-    assert meta["features"] == FeatureSpec(prediction=True).size
-    env = gym.make(risk_env.ENV_ID, uncertainty="high", risk_tolerance=1500.0)
-    agent = PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=env.unwrapped.scenario)
-    assert agent.context == Context(1500.0, env.unwrapped.scenario.uncertainty)
-    assert agent.predict(env.reset(seed=0)[0])[0].shape == (2,)
-    other = gym.make(risk_env.ENV_ID, severity="probability", risk_tolerance=0.1)
-    with pytest.raises(ValueError, match="severity"):
-        PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
-
-
 def test_seed_table_and_best_seed() -> None:
     results = {
         0: {"e_acc": 80.0, "collision_rate": 0.01, "goal_rate": 0.9, "episode_cost": 0.01, "d_min": 9.0},
@@ -267,6 +284,7 @@ def test_seed_table_and_best_seed() -> None:
     assert "| mean ± std over 3 | 80.0 ± 10.0 | 0.3% ± 0.6% |" in table
 
 
+@pytest.mark.slow  # two trainings and their scoring; test_seed_table_and_best_seed is the fast test
 def test_seeds_train_score_and_ship_the_best(tmp_path: Path) -> None:
     out = tmp_path / "ppo"
     command = [sys.executable, "-m", "benchmarks.train_ppo", "--out", str(out), "--total-timesteps", "512"]

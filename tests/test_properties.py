@@ -32,7 +32,7 @@ from risk_env import ENV_ID, ESTIMATOR_NAMES, OBJECT_MOTIONS, RISK_TOLERANCES, R
 from risk_env import observation as ob
 from risk_env.envs.transition import observe
 from risk_env.models.path import point
-from risk_env.scenario.scenario import OVERRIDES, SEVERITY_NAMES, UNCERTAINTY_PRESETS
+from risk_env.scenario.scenario import OVERRIDES, RISK_BOUNDS, SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 FUZZED: collections.Counter[str] = collections.Counter()
 """Fuzzed steps by test family (single-env steps, batched copy-steps, agent decisions)."""
@@ -111,6 +111,9 @@ def scenarios(
         object_start = (ego_start[0] + draw(real(-15, 15)), ego_start[1] + draw(real(-15, 15)))
     else:
         object_start = (draw(real(-30, 80)), draw(real(-30, 30)))
+    severity = draw(st.sampled_from(SEVERITY_NAMES))
+    bound = RISK_BOUNDS[severity][0]  # a tolerance in the severity's own unit
+    joules = st.one_of(st.sampled_from(RISK_TOLERANCES), real(0.0, 3000.0))
     overrides: dict[str, Any] = {
         "curvature": curvature,
         "ego_start": ego_start,
@@ -119,8 +122,8 @@ def scenarios(
         "object_turn_rate": draw(real(-0.5, 0.5)),
         "v_ref": draw(real(0.0, 8.0)),
         "initial_input": (draw(real(-4.0, 8.0)), draw(real(-0.8, 0.8))),
-        "risk_tolerance": draw(st.one_of(st.sampled_from(RISK_TOLERANCES), real(0.0, 3000.0))),
-        "severity": draw(st.sampled_from(SEVERITY_NAMES)),
+        "risk_tolerance": draw(joules if math.isinf(bound) else st.one_of(st.just(0.0), real(0.0, bound))),
+        "severity": severity,
         "dt": draw(st.sampled_from((0.5, 0.5, 0.2, 1.0))),
         "max_steps": draw(integral(1, max_steps)),
         "mc_samples": draw(integral(1, 64)),
@@ -421,13 +424,7 @@ def check_agent_action(scenario: Scenario, action: np.ndarray, obs: np.ndarray) 
 AGENTS = {"RMPC": lambda s: RMPC(s), "SMPC": lambda s: SMPC(s, risk="exact")}
 
 
-@fuzz(14)
-@given(
-    name=st.sampled_from(sorted(AGENTS)),
-    scenario=scenarios(max_steps=6, horizon=3),
-    seed=st.integers(0, 2**16),
-)
-def test_agents_act_within_limits_in_closed_loop(name, scenario, seed):
+def agents_in_closed_loop(name: str, scenario: Scenario, seed: int) -> None:
     agent = AGENTS[name](scenario)
     assert isinstance(agent, Policy)
     env = RiskCrossingEnv(scenario=scenario, object_motion="sampled")
@@ -450,9 +447,7 @@ def agent_observations(draw: st.DrawFn) -> tuple[Scenario, list[np.ndarray]]:
     return scenario, draw(st.lists(observations(scenario), min_size=1, max_size=3))
 
 
-@fuzz(14)
-@given(name=st.sampled_from(sorted(AGENTS)), case=agent_observations())
-def test_agents_act_within_limits_on_fuzzed_observations(name, case):
+def agents_on_observations(name: str, case: tuple[Scenario, list[np.ndarray]]) -> None:
     scenario, batch = case
     agent = AGENTS[name](scenario)
     actions, _ = agent.predict(np.stack(batch), episode_start=np.ones(len(batch), dtype=bool))
@@ -462,3 +457,17 @@ def test_agents_act_within_limits_on_fuzzed_observations(name, case):
         check_agent_action(scenario, action, obs)
     single, _ = agent.predict(batch[0], episode_start=True)
     check_agent_action(scenario, single, batch[0])
+
+
+AGENT_NAMES = st.sampled_from(sorted(AGENTS))
+CLOSED_LOOPS = given(name=AGENT_NAMES, scenario=scenarios(max_steps=6, horizon=3), seed=st.integers(0, 2**16))
+test_agents_act_within_limits_in_closed_loop = fuzz(6)(CLOSED_LOOPS(agents_in_closed_loop))
+test_agents_act_within_limits_on_fuzzed_observations = fuzz(8)(
+    given(name=AGENT_NAMES, case=agent_observations())(agents_on_observations)
+)
+test_agents_act_within_limits_in_closed_loop_long = pytest.mark.slow(
+    fuzz(40)(CLOSED_LOOPS(agents_in_closed_loop))
+)
+test_agents_act_within_limits_on_fuzzed_observations_long = pytest.mark.slow(
+    fuzz(40)(given(name=AGENT_NAMES, case=agent_observations())(agents_on_observations))
+)

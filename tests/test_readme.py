@@ -57,6 +57,15 @@ def test_readme_starts_with_the_two_commands_each_in_its_own_block():
     assert README.index("```") > README.index("## Install and run")
 
 
+def test_ci_runs_the_readmes_test_command_itself():
+    """``.ci/run`` reads the test command from README.md (one line matches its pattern: the second
+    block's) and installs nothing of its own, so CI runs what a newcomer runs."""
+    script = (ROOT / ".ci" / "run").read_text()
+    (pattern,) = re.findall(r"grep -E '([^']+)' README.md", script)
+    assert [line for line in README.splitlines() if re.search(pattern, line)] == [BLOCKS[1][1].strip()]
+    assert not [line for line in script.splitlines() if line.lstrip().startswith(("pip ", "python "))]
+
+
 def test_readme_states_the_python_versions_and_the_cpu_index():
     assert "Python 3.10 to 3.13" in README
     assert "--index-url https://download.pytorch.org/whl/cpu" in README

@@ -332,9 +332,11 @@ def test_exact_risk_skips_only_states_whose_disc_misses_the_box():
     ("case", "kink"),
     [
         ((0.3, 0.2, 0.1, 0.1, 1.0, 1.0), False),  # low preset, n = 1, object inside the disc
-        ((2.9, 0.4, 0.3, 0.3, 3.0, 3.0), False),  # low, n = 3: the disc edge through the object
+        pytest.param((2.9, 0.4, 0.3, 0.3, 3.0, 3.0), False, marks=pytest.mark.slow),  # low, n = 3: disc edge
         ((2.0, -2.9, 0.8, 0.8, 2.0, 2.0), False),  # medium, truncation active
-        ((4.0, -0.2, 0.42, 0.45, 4.2, 4.5), False),
+        pytest.param(
+            (4.0, -0.2, 0.42, 0.45, 4.2, 4.5), False, marks=pytest.mark.slow
+        ),  # a slightly anisotropic box
         ((-1.2, 3.3, 1.5, 1.7, 3.0, 3.4), False),  # anisotropic, the box cuts the disc
         ((-4.0, 3.9, 1.5, 1.5, 3.0, 3.0), True),  # high, n = 1: the disc over the box's corner
         ((9.0, 6.0, 4.5, 4.5, 9.0, 9.0), True),  # high, the disc on the box's corner

@@ -31,6 +31,7 @@ from agents.mpc.nlp.solver import (
 )
 from agents.mpc.objects import MODE_THRESHOLD, Slots, check_slots, check_threshold, combine
 from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step, StepContext, StepInput
+from risk_env import checks
 from risk_env import observation as ob
 from risk_env.prediction.belief import Belief
 from risk_env.prediction.predictors import Predictor, make_predictor
@@ -142,12 +143,13 @@ class PathFollowingMPC(RiskForm):
     ) -> None:
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env Scenario, got {type(scenario).__name__}")
-        if not (isinstance(backoff, (int, float)) and backoff >= 0):
-            raise ValueError(f"backoff must be >= 0, got {backoff!r}")
-        if isinstance(cold_starts, bool) or not isinstance(cold_starts, int) or cold_starts < 1:
-            raise ValueError(f"cold_starts must be an integer >= 1, got {cold_starts!r}")
+        backoff = checks.positive("backoff", backoff, strict=False)  # numpy's numbers pass too
+        cold_starts = checks.integer("cold_starts", cold_starts, minimum=1)
+        jit_opt = checks.integer("jit_opt", jit_opt, minimum=0)
+        seed = None if seed is None else checks.integer("seed", seed, minimum=0)
         cap = RT_SHARE * scenario.dt if max_solve_time is None else max_solve_time
-        if isinstance(cap, bool) or not isinstance(cap, (int, float)) or not cap > 0:
+        cap = checks.real("max_solve_time", cap)
+        if not cap > 0:
             raise ValueError(f"max_solve_time must be a time > 0 [s] (or None), got {max_solve_time!r}")
         self.max_solve_time = float(cap)
         """The wall-time cap of one step [s]."""
@@ -169,7 +171,7 @@ class PathFollowingMPC(RiskForm):
             solver=solver,
             stage_cost=stage_cost,
             jit=bool(jit),
-            jit_opt=int(jit_opt),
+            jit_opt=jit_opt,
             jit_cache=jit_cache,
             tol=tol,
             max_iter=max_iter,
@@ -207,13 +209,11 @@ class PathFollowingMPC(RiskForm):
 
     @risk_tolerance.setter
     def risk_tolerance(self, value: float) -> None:
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"risk_tolerance must be a number >= 0, got {value!r}") from None
+        value = checks.real("risk_tolerance", value)
         if not math.isfinite(value) or value < 0:
             raise ValueError(f"risk_tolerance must be a finite number >= 0, got {value!r}")
-        self._epsilon = value
+        s = self.estimator.severity
+        self._epsilon = checks.within_severity("risk_tolerance", value, s.name, s.upper_bound, s.unit)
 
     @property
     def horizon(self) -> int:

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from risk_env import observation as ob
+from risk_env.models.frame import to_frame
 from risk_env.models.ops import NUMPY
 from risk_env.models.path import point
 from risk_env.prediction.belief import Belief
@@ -40,7 +41,8 @@ def risk_possible(scenario: Scenario, x0: np.ndarray, future: Belief, radius: fl
     """Whether some step's risk of an object with beliefs ``future`` (and collision distance
     ``radius`` [m]) could be nonzero where the ego can reach from x_0 (else its slot is inactive;
     no active slot: the ``"free"`` variant)."""
-    distance = signed_box_distance(x0[0] - future.x, x0[1] - future.y, future.half_x, future.half_y)
+    along, across = to_frame(x0[0] - future.x, x0[1] - future.y, future.frame)  # the box's frame
+    distance = signed_box_distance(along, across, future.half_x, future.half_y)
     spare = distance - reach(scenario, x0[4]) - radius
     return bool(np.any(spare <= FREE_MARGIN))
 

@@ -13,6 +13,7 @@ from agents.mpc.controller import PathFollowingMPC
 from agents.mpc.nlp import risk_budget as rb
 from agents.mpc.nlp.parameters import INACTIVE, NUMBER_COLUMNS
 from agents.mpc.objects import slot_rows, symbolic
+from risk_env import checks
 from risk_env.models.ops import CASADI
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import ExactRisk, MonteCarloRisk, RiskEstimator
@@ -39,8 +40,8 @@ class SMPC(PathFollowingMPC):
 
     The exact risk's constraint is written ``max(clearance, (epsilon - R)/scale) >= backoff``, and
     ``clearance >= backoff`` alone at epsilon = 0 (the core's ``"zero"`` variant). R there is
-    :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`: the env's quadrature cut at +-5 sigma (40 nodes,
-    not 48) with its bounded shortfall added back, never below the env's R and above it by at most
+    :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`: the env's quadrature cut at +-5 sigma (54 nodes,
+    not 66) with its bounded shortfall added back, never below the env's R and above it by at most
     5.7e-7 E[s]; its derivatives are those of the integral (see
     :func:`~risk_env.risk.estimators.disc_probability`), a third of the cost of differentiating the rule. The
     clearance is the distance from the ego centre to where the object may be, minus ``r_e + r_o``:
@@ -119,12 +120,13 @@ class SMPC(PathFollowingMPC):
         self.risk_weight = rb.check_weight(risk_weight)
         """w, the weight of sum_n R_{n|k} in the objective (None: none); fixed at construction."""
         self._spent: dict[int, float] = {}
-        self._budget_backoff = float(kwargs.get("backoff", 1e-3))
+        self._budget_backoff = checks.positive("backoff", kwargs.get("backoff", 1e-3), strict=False)
         if risk not in self.RISK_METHODS:
             raise ValueError(f"unknown SMPC risk method {risk!r}; expected one of {self.RISK_METHODS}")
-        for name, value in (("samples", samples), ("pilot_samples", pilot_samples)):
-            if value is not None and (isinstance(value, bool) or int(value) != value or value < 1):
-                raise ValueError(f"{name} must be an integer >= 1 (or None), got {value!r}")
+        if samples is not None:
+            samples = checks.integer("samples", samples, minimum=1)
+        if pilot_samples is not None:
+            pilot_samples = checks.integer("pilot_samples", pilot_samples, minimum=1)
         self.risk_method = risk
         self.pilot_samples = pilot_samples
         self._pilot: SMPC | None = None
@@ -165,10 +167,11 @@ class SMPC(PathFollowingMPC):
     @risk_tolerance.setter
     def risk_tolerance(self, value: float) -> None:
         budget = getattr(self, "risk_budget", None)
-        if budget is not None and isinstance(value, (int, float)) and value == math.inf:
+        unbounded = checks.is_real(value) and float(value) == math.inf
+        if budget is not None and unbounded:
             self._requested_epsilon = math.inf
         else:
-            if isinstance(value, (int, float)) and value == math.inf:
+            if unbounded:
                 raise ValueError(
                     "risk_tolerance=inf (no per-step bound) needs a risk_budget; got risk_budget=None"
                 )

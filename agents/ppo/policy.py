@@ -18,7 +18,6 @@ Needs the ``rl`` extra (``pip install "riskcrossing[rl]"``: torch CPU and stable
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +26,11 @@ from typing import Any
 import numpy as np
 
 from agents.base import as_batch
+from agents.ppo.metadata import build, read_metadata
+from agents.ppo.network import LIBM, PolicyNet
+from risk_env import checks
 from risk_env import observation as layout
 from risk_env.models.dynamics import unicycle_step
-from risk_env.models.ops import NUMPY
 from risk_env.scenario.parts import Uncertainty
 from risk_env.scenario.scenario import Scenario
 
@@ -64,12 +65,13 @@ def features(obs: np.ndarray) -> np.ndarray:
     x, y, theta = o[:, layout.EGO_POSE].T
     v, omega = o[:, layout.EGO_INPUT].T
     ox, oy, otheta, ov = first_object(o)
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = LIBM.cos(theta), LIBM.sin(theta)
     dx, dy = ox - x, oy - y
     rel_heading = otheta - theta
+    rel_c, rel_s = LIBM.cos(rel_heading), LIBM.sin(rel_heading)
     # the object's velocity relative to the ego's, in the ego's frame
-    vx = ov * np.cos(rel_heading) - v
-    vy = ov * np.sin(rel_heading)
+    vx = ov * rel_c - v
+    vy = ov * rel_s
     raw = np.stack(
         (
             *(o[:, layout.PATH_ERROR].T),
@@ -77,11 +79,11 @@ def features(obs: np.ndarray) -> np.ndarray:
             omega,
             c * dx + s * dy,
             -s * dx + c * dy,
-            np.cos(rel_heading),
-            np.sin(rel_heading),
+            rel_c,
+            rel_s,
             vx,
             vy,
-            np.hypot(dx, dy),
+            LIBM.hypot(dx, dy),
             o[:, layout.PROGRESS],
         ),
         axis=-1,
@@ -134,6 +136,14 @@ class FeatureSpec:
     slots: int = 1
     """K, the observation's object slots the policy is trained for (1: the first present object)."""
 
+    def __post_init__(self) -> None:
+        checks.flag("prediction", self.prediction)
+        object.__setattr__(self, "dt", checks.positive("dt", self.dt))
+        if not isinstance(self.steps, tuple) or not self.steps:
+            raise TypeError(f"steps must be a non-empty tuple of integers, got {checks.describe(self.steps)}")
+        object.__setattr__(self, "steps", tuple(checks.integer("steps", n, minimum=1) for n in self.steps))
+        object.__setattr__(self, "slots", checks.integer("slots", self.slots, minimum=1))
+
     @property
     def size(self) -> int:
         """Length of the feature vector: ``14 + 3 (+ 4 len(steps))`` with one slot, ``7 + 8 K + 3
@@ -177,12 +187,12 @@ class FeatureSpec:
         (c1, c2, theta, v, omega) in the ego's frame and the box's half extents along the ego's
         axes (the c1/c2 box rotated into the ego's frame)."""
         x, y, theta = o[:, layout.EGO_POSE].T
-        c, s = np.cos(theta), np.sin(theta)
+        c, s = LIBM.cos(theta), LIBM.sin(theta)
         ox, oy, oth, ov, ow = measured.T
         out, n_prev = [], 0
         for n in self.steps:
             for _ in range(n - n_prev):
-                ox, oy, oth = unicycle_step(ox, oy, oth, ov, ow, self.dt, NUMPY)
+                ox, oy, oth = unicycle_step(ox, oy, oth, ov, ow, self.dt, LIBM)
             n_prev = n
             hx, hy = ctx[:, 4] + n * ctx[:, 2], ctx[:, 5] + n * ctx[:, 3]
             dx, dy = ox - x, oy - y
@@ -210,21 +220,22 @@ def slot_features(obs: np.ndarray) -> np.ndarray:
     o = np.atleast_2d(np.asarray(obs, dtype=float))
     x, y, theta = o[:, layout.EGO_POSE].T
     v, omega = o[:, layout.EGO_INPUT].T
-    c, s = np.cos(theta), np.sin(theta)
+    c, s = LIBM.cos(theta), LIBM.sin(theta)
     ego = np.stack((*(o[:, layout.PATH_ERROR].T), v, omega, o[:, layout.PROGRESS]), axis=-1)
     parts = [ego / _SCALE[[0, 1, 2, 3, 4, 5, 13]]]
     for row in np.moveaxis(slot_table(o), 1, 0):  # (B, 6) per slot
         flag, ox, oy, otheta, ov = row[:, :5].T
         dx, dy, rel = ox - x, oy - y, otheta - theta
+        rel_c, rel_s = LIBM.cos(rel), LIBM.sin(rel)
         raw = np.stack(
             (
                 c * dx + s * dy,
                 -s * dx + c * dy,
-                np.cos(rel),
-                np.sin(rel),
-                ov * np.cos(rel) - v,
-                ov * np.sin(rel),
-                np.hypot(dx, dy),
+                rel_c,
+                rel_s,
+                ov * rel_c - v,
+                ov * rel_s,
+                LIBM.hypot(dx, dy),
             ),
             axis=-1,
         )
@@ -292,6 +303,9 @@ class PPOAgent:
         context: Context | None = None,
     ) -> None:
         self.model = model
+        """The SB3 PPO model (torch): samples the non-deterministic actions."""
+        self.policy = PolicyNet.from_sb3(model.policy)
+        """The deterministic action in float64 from the model's weights, the same on every CPU."""
         self.limits = limits
         self.spec = spec
         """The conditioned features the policy sees; None: the 14 of :func:`features` alone."""
@@ -313,6 +327,11 @@ class PPOAgent:
         """
         from stable_baselines3 import PPO
 
+        if scenario is not None and not isinstance(scenario, Scenario):
+            raise TypeError(
+                "scenario must be a risk_env Scenario (e.g. Scenario.preset('medium') or"
+                f" env.unwrapped.scenario) or None, got {checks.describe(scenario)}"
+            )
         path = Path(path)
         zip_path = path if path.suffix == ".zip" else path.with_suffix(".zip")
         if not zip_path.is_file():
@@ -320,23 +339,18 @@ class PPOAgent:
                 f"no PPO model at {zip_path}; train one with python -m benchmarks.train_ppo"
             )
         meta_path = zip_path.with_suffix(METADATA_SUFFIX)
-        metadata = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+        metadata = read_metadata(meta_path)
         if scenario is not None:
             limits = InputLimits.of(scenario, bool(metadata.get("args", {}).get("forward_only", False)))
         elif "limits" in metadata:
-            limits = InputLimits(**metadata["limits"])
+            limits = build(meta_path, "limits", InputLimits, metadata["limits"])
         else:
             raise ValueError(f"{meta_path} is missing: pass scenario= to set the input limits")
-        spec = (
-            FeatureSpec(**{**metadata["feature_spec"], "steps": tuple(metadata["feature_spec"]["steps"])})
-            if "feature_spec" in metadata
-            else None
-        )
+        fields = metadata.get("feature_spec")
+        spec = None if fields is None else build(meta_path, "feature_spec", FeatureSpec, fields)
         expected = FEATURES if spec is None else spec.size
-        if metadata.get("features", FEATURES) != expected:
-            raise ValueError(
-                f"{zip_path} was trained on {metadata['features']} features; this version has {expected}"
-            )
+        if (trained_on := metadata.get("features", FEATURES)) != expected:
+            raise ValueError(f"{zip_path} was trained on {trained_on} features; this version has {expected}")
         context = None
         if spec is not None:
             trained = metadata.get("args", {}).get("severity", "paper")
@@ -362,7 +376,9 @@ class PPOAgent:
         episode_start: np.ndarray | None = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, None]:
-        """Inputs for ``observation (10 + 6 K,)`` or ``(B, 10 + 6 K)``; raises on a wrong shape or a NaN."""
+        """Inputs for ``observation (10 + 6 K,)`` or ``(B, 10 + 6 K)``; raises on a wrong shape or a NaN.
+        ``deterministic``: the policy's mean action, evaluated in float64 (:class:`PolicyNet`) so
+        that it is the same on every CPU; otherwise an action sampled by SB3 (torch)."""
         length = np.shape(observation)[-1] if np.ndim(observation) else 0
         size = layout.size(layout.slot_count(length)) if length > layout.SIZE else layout.SIZE
         obs, single = as_batch(observation, size)
@@ -372,6 +388,9 @@ class PPOAgent:
             seen = features(obs)
         else:
             seen = self.spec(obs, self.context.array())
-        action, _ = self.model.predict(seen, deterministic=deterministic)
+        if deterministic:
+            action = np.clip(self.policy(seen), -1.0, 1.0)  # as SB3 clips to the action space
+        else:
+            action, _ = self.model.predict(seen, deterministic=False)
         inputs = to_inputs(action, obs[:, layout.EGO_INPUT], self.limits)
         return (inputs[0] if single else inputs), None

@@ -21,6 +21,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from stable_baselines3.common.vec_env import VecEnv
 
 from agents.ppo.policy import EPSILON_UNIT, FEATURES, Context, FeatureSpec, InputLimits, features, to_inputs
+from risk_env import checks
 from risk_env import observation as layout
 from risk_env.envs.vector_infos import masked
 from risk_env.scenario.parts import Uncertainty
@@ -190,8 +191,8 @@ class LevelMix(VectorEnv):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every copy; ``seed`` an int (copy i gets seed + i) or one per copy."""
-        if isinstance(seed, int):
-            seed = [seed + i for i in range(self.num_envs)]
+        if seed is not None:  # an integer of any integral type, or one per copy
+            seed = checks.seeds(seed, self.num_envs)
         outs = [
             e.reset(seed=None if seed is None else list(seed[a:b]), options=options)
             for e, a, b in zip(self.envs, self._bounds[:-1], self._bounds[1:], strict=True)

@@ -173,6 +173,11 @@ class IntersectionAdapter:
         predictor: str | Predictor | None = "lane",
         **overrides: Any,
     ) -> None:
+        if not callable(make_agent):
+            raise TypeError(
+                "make_agent must be callable, Scenario -> agent (e.g. RMPC or"
+                f" functools.partial(SMPC, risk='exact')), got {checks.describe(make_agent)}"
+            )
         self.env = env
         base = unwrapped_highway(env)
         check_adapter_config(base)
@@ -184,6 +189,7 @@ class IntersectionAdapter:
         self.destination = destination or base.config.get("destination")
         if not self.destination:
             raise ValueError("no destination: pass destination= or set the env's config['destination']")
+        switch_ahead = checks.real("switch_ahead", switch_ahead)
         if not (math.isfinite(switch_ahead) and switch_ahead >= 0):
             raise ValueError(f"switch_ahead must be >= 0 [m], got {switch_ahead!r}")
         self.switch_ahead = float(switch_ahead)
@@ -203,9 +209,7 @@ class IntersectionAdapter:
         self.route: RoutePath | None = None
         self.lane = 0
         """Index in :attr:`route` of the lane being followed."""
-        if isinstance(slots, bool) or not isinstance(slots, int) or slots < 1:
-            raise ValueError(f"slots must be an integer >= 1, got {slots!r}")
-        self.slots = slots
+        self.slots = checks.integer("slots", slots, minimum=1)
         self.last_objects = np.zeros((0, 5))
         """Measurements ``(m, 5)``, m <= :attr:`slots`, of the vehicles planned against at the last
         step, nearest first."""

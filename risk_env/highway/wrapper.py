@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
 
 from risk_env import checks
-from risk_env.highway.common import highway_scenario, unwrapped_highway, vehicle_measurement
+from risk_env.highway.common import highway_scenario, policy_period, unwrapped_highway, vehicle_measurement
 from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.prediction.belief import Belief, predict
 from risk_env.prediction.predictors import Predictor
@@ -88,6 +89,15 @@ class RiskCostWrapper(gym.Wrapper):
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a risk_env.Scenario, got {type(scenario).__name__}")
         vehicle_index = checks.integer("vehicle_index", vehicle_index, minimum=0)
+        if seed is not None:
+            seed = checks.integer("seed", seed, minimum=0)
+        period = policy_period(env)
+        if not math.isclose(scenario.dt, period, rel_tol=1e-9):
+            raise ValueError(
+                f"scenario.dt = {scenario.dt:g} s, but one step of the env lasts {period:g} s"
+                " (simulation_frequency // policy_frequency frames): the risk predicts one env step"
+                " ahead; build the scenario with risk_env.highway.highway_scenario(env, ...)"
+            )
         self.scenario = scenario
         self.estimator: RiskEstimator = make_estimator(estimator, scenario)
         self.vehicle_index = vehicle_index

@@ -1,7 +1,13 @@
 """The disc probability P(||q_e - q_o|| <= r) under the object's truncated 2-D Gaussian, and the
 signed distance to its truncation box: the geometry of the exact risk
-(:class:`risk_env.risk.estimators.ExactRisk`),
-written once for every face of :mod:`risk_env.models.ops`."""
+(:class:`risk_env.risk.estimators.ExactRisk`), written once for every face of
+:mod:`risk_env.models.ops`.
+
+A belief's covariance and truncation box lie in its own frame (:attr:`Belief.frame
+<risk_env.prediction.belief.Belief.frame>`, the angle of its first axis from c1): the ego's offset is
+turned into that frame (:func:`to_frame`), where the box is axis-aligned; the collision disc is
+rotation-invariant, so the integral there is the one of an axis-aligned belief.
+"""
 
 from __future__ import annotations
 
@@ -10,12 +16,28 @@ from typing import Any
 
 import numpy as np
 
+from risk_env.models.frame import to_frame
 from risk_env.models.ops import NUMPY, Ops
 from risk_env.prediction.belief import Belief
 from risk_env.risk.quadrature import EDGE, GAUSS_W, GAUSS_X, GEOMETRY_FLOOR, SIGMA_BREAKS, SUPPORT
 
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+
+
+def outer_is_y(dx: Any, dy: Any, sx: Any, sy: Any, hx: Any, hy: Any, ops: Ops = NUMPY) -> Any:
+    """Whether the quadrature's outer axis is the second one (else the first), for offsets
+    ``(dx, dy)`` in the belief's frame, floored spreads and half widths.
+
+    Where the outer axis has its mass, the inner chord's ends sweep through the inner Gaussian at
+    (e_out / e_in) |tan t| inner spreads per outer spread, tan t growing with the outer offset
+    (|d_out| + e_out: the bulk's far side); the rule's breaks resolve the outer density, not that
+    sweep. So the outer axis is the one of the smaller ``(|d| + e) e^2``, e = min(sigma, half
+    width) the axis' effective spread: for a round belief the axis of least offset, for an
+    elongated one mostly its narrow axis, but not where its far offset puts its mass at the
+    disc's tangent."""
+    ex, ey = ops.minimum(sx, hx), ops.minimum(sy, hy)
+    return (ops.abs(dx) + ex) * (ex * ex) > (ops.abs(dy) + ey) * (ey * ey)
 
 
 def disc_probability(
@@ -29,15 +51,26 @@ def disc_probability(
     support: float = SUPPORT,
 ) -> Any:
     """P(||d - z|| <= radius) for z ~ truncated N(0, diag(sigma_x^2, sigma_y^2)) on the box
-    ``[-half_x, half_x] x [-half_y, half_y]``; ``(dx, dy)`` = ego centre minus object mean [m].
+    ``[-half_x, half_x] x [-half_y, half_y]`` in the belief's frame; ``(dx, dy)`` = ego centre
+    minus object mean [m] in the world, turned into the frame here (:func:`to_frame`).
     ``sigma_breaks`` and ``support``: the rule (:mod:`risk_env.risk.quadrature`; default the env's).
 
     One axis (the inner) is integrated in closed form with Phi, the other (the outer) by
     Gauss-Legendre quadrature in the disc angle t (x = dx + r sin t, which removes the
-    square-root ends of the chord). The outer axis is the one along which the ego is least
-    offset, so near the object the disc boundary runs along it and the sharp crossing of the
-    boundary falls to the closed form. The outer integral is split where the box edges cut the
-    disc and at fixed multiples of the outer standard deviation.
+    square-root ends of the chord). Three choices make the rule exact for any aspect ratio
+    (within 4e-6 of nested adaptive quadrature, ``python -m benchmarks.exact_accuracy``):
+
+    - the outer axis (:func:`outer_is_y`) is the one along which the inner chord's ends sweep
+      slowest through the inner Gaussian: for a round belief the axis of least offset (near the
+      object the disc boundary runs along it, and its sharp crossing falls to the closed form),
+      for an elongated one mostly its narrow axis (whose sharp density the breaks resolve);
+    - the outer range is cut to where the chord meets the inner box (``r cos t >= |dy| - hy``,
+      hy at most :data:`~risk_env.risk.quadrature.SUPPORT` inner sigmas): beyond, the chord
+      misses the box (or all but < 3e-12 of the inner mass) and P gets nothing, and near the
+      disc's tangent points the outer density, stretched in t, would otherwise be left to few
+      nodes;
+    - the outer integral is split where the box edges cut the disc and at fixed multiples of
+      the outer standard deviation, with :data:`~risk_env.risk.quadrature.GAUSS_NODES` nodes each.
 
     Derivatives (the CasADi face) are those of the integral, not of where the rule puts its
     nodes: the segment edges are held constant (:meth:`~risk_env.models.ops.Ops.stop_derivative`),
@@ -46,7 +79,8 @@ def disc_probability(
     motion of the outer range's two ends, where the integrand jumps to 0, enters through two
     extra nodes at the held ends whose weights are the ends' motion: 0 in value, Leibniz's term
     to second order in derivatives. Each node's term is then a product of a function of dx and
-    one of dy, cheap to differentiate: the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
+    one of dy, cheap to differentiate (figures of the earlier 4-node rule, the derivative scheme
+    unchanged): the exact SMPC's Hessian of the Lagrangian takes 54 % fewer
     instructions than through the edges (asin, acos, the sorting network), its Jacobian 46 %
     fewer (with the same rule; the SMPC's shorter rule saves 14 % more). The gradient
     is the quadrature of P's gradient, which differs from the derivative of the rule's value by
@@ -62,11 +96,12 @@ def disc_probability(
     finite differences of an adaptive quadrature.
     """
     r = radius
+    dx, dy = to_frame(dx, dy, belief.frame, ops)
     sx = ops.maximum(belief.sigma_x, GEOMETRY_FLOOR)
     sy = ops.maximum(belief.sigma_y, GEOMETRY_FLOOR)
     hx = ops.maximum(belief.half_x, GEOMETRY_FLOOR)
     hy = ops.maximum(belief.half_y, GEOMETRY_FLOOR)
-    swap = ops.abs(dx) > ops.abs(dy)
+    swap = outer_is_y(dx, dy, sx, sy, hx, hy, ops)
     dx, dy = ops.select(swap, dy, dx), ops.select(swap, dx, dy)  # one derivative path each
     sx, sy = ops.where(swap, sy, sx), ops.where(swap, sx, sy)
     hx, hy = ops.where(swap, hy, hx), ops.where(swap, hx, hy)
@@ -76,8 +111,11 @@ def disc_probability(
     at_x = ops.stack([-hx, hx, *(k * sx for k in sigma_breaks)])
     at_x = ops.clip(at_x, -support * ex(sx), support * ex(sx))
     t_x = ops.asin(ops.clip((at_x - ex(dx)) / r, -EDGE, EDGE))
-    t_lo = ops.part(t_x, slice(0, 1))
-    t_hi = ops.maximum(ops.part(t_x, slice(1, 2)), t_lo)
+    # ... cut to where the chord meets the inner box (within SUPPORT sigma) ...
+    reach = ops.minimum(hy, SUPPORT * sy)
+    meet = ops.acos(ops.clip((ops.abs(dy) - reach) / r, 0.0, EDGE))
+    t_lo = ops.maximum(ops.part(t_x, slice(0, 1)), -ex(meet))
+    t_hi = ops.maximum(ops.minimum(ops.part(t_x, slice(1, 2)), ex(meet)), t_lo)
     # ... and where the chord's ends cross the inner box edges: r cos t = |hy -+ dy|.
     a = ops.acos(ops.clip(ops.stack([ops.abs(hy - dy), ops.abs(hy + dy)]) / r, 0.0, EDGE))
     inner = ops.sort(ops.clip(ops.stack_vectors([ops.part(t_x, slice(2, None)), a, -a]), t_lo, t_hi))
@@ -102,11 +140,10 @@ def disc_probability(
     zy = ops.erf(hy * ky)
     # Complementary form: the exact mass of the outer range times the full inner mass, minus what
     # the chord misses; exact wherever the chord spans the inner box. Twice the missed inner mass:
-    # above the chord 2 (Phi(hy) - Phi(top)), below it 2 (Phi(bottom) - Phi(-hy)), at most 2 zy
-    # (a chord that misses the box).
-    above = ops.maximum(ex(zy) - ops.erf(top * ex(ky)), 0.0)
-    below = ops.maximum(ex(zy) + ops.erf(bottom * ex(ky)), 0.0)
-    missed_twice = ops.minimum(above + below, 2.0 * ex(zy))
+    # above the chord 2 (Phi(hy) - Phi(top)), below it 2 (Phi(bottom) - Phi(-hy)), the ends
+    # clipped to the box (the range is cut to where the chord meets it, so at most 2 zy).
+    top, bottom = ops.minimum(top, ex(hy)), ops.maximum(bottom, -ex(hy))
+    missed_twice = 2.0 * ex(zy) - ops.erf(top * ex(ky)) + ops.erf(bottom * ex(ky))
     u = x * ex(1.0 / (_SQRT2 * sx))
     missed = ops.sum(w * half_chord * ops.exp(-u * u) * missed_twice) * (0.5 * _INV_SQRT_2PI) / sx
     s_lo, s_hi = ops.sin(ops.part(t_lo, 0)), ops.sin(ops.part(t_hi, 0))
@@ -115,8 +152,16 @@ def disc_probability(
     p = ops.clip((mass * zy - missed) / (zx * zy), 0.0, 1.0)
     if not gate:  # the caller passes only states whose disc meets the box
         return p
-    # Exactly 0 when the disc misses the box (the complementary form leaves ~1e-7 there).
-    return ops.where(signed_box_distance(dx, dy, hx, hy, ops) < r, p, 0.0 * p)
+    # Exactly 0 when the disc misses the box cut to +-SUPPORT sigma.
+    ux, uy = support_halves(sx, sy, hx, hy, ops)
+    return ops.where(signed_box_distance(dx, dy, ux, uy, ops) < r, p, 0.0 * p)
+
+
+def support_halves(sx: Any, sy: Any, hx: Any, hy: Any, ops: Ops = NUMPY) -> tuple[Any, Any]:
+    """Half widths [m] of the box cut to +-:data:`~risk_env.risk.quadrature.SUPPORT` standard
+    deviations (floored spreads and half widths in): where the disc misses it, P = 0 exactly (the
+    mass left out is below 3e-12 per axis)."""
+    return ops.minimum(hx, SUPPORT * sx), ops.minimum(hy, SUPPORT * sy)
 
 
 def signed_box_distance(dx: Any, dy: Any, half_x: Any, half_y: Any, ops: Ops = NUMPY) -> Any:

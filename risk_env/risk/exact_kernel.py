@@ -6,7 +6,7 @@ evaluate the same integral on the same nodes (:mod:`risk_env.risk.quadrature`) a
 1e-12 (``tests/test_exact_kernel.py``):
 
 - :func:`disc_probability_scalar`: one ego state; the segment set-up in Python floats, then one
-  numpy pass over the 48 nodes;
+  numpy pass over the 66 nodes;
 - :func:`disc_probability_batch`: B ego states, arrays laid out (entries, B). Before the costly
   functions run it drops what adds nothing (segments of zero width or where the chord spans the
   inner box) and sorts the rest by how many chord ends need Phi (2, 1 or 0); sin and cos come
@@ -15,7 +15,8 @@ evaluate the same integral on the same nodes (:mod:`risk_env.risk.quadrature`) a
 Both take ego-minus-mean offsets ``(dx, dy)`` [m], the radius r = r_e + r_o [m], the standard
 deviations ``(sx, sy)`` [m] and the box half widths ``(hx, hy)`` [m], floored to
 :data:`~risk_env.risk.quadrature.GEOMETRY_FLOOR` by the caller, and assume that the disc meets the box
-(off it the probability is exactly 0 and callers return that without integrating).
+(off it, cut to +-SUPPORT sigma, the probability is exactly 0 and callers return that without
+integrating: :func:`risk_env.risk.disc.support_halves`).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ _SQRT2 = math.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 _K = len(GAUSS_X)
 
-# Nodes and weights are linear in the segment edges e (13,): (t, w) = e @ _EDGES_TO_NODES, with
+# Nodes and weights are linear in the segment edges e (SEGMENTS + 1,): (t, w) = e @ _EDGES_TO_NODES, with
 # t = lo (1 - x)/2 + hi (1 + x)/2 and w = (hi - lo) W/2 on each segment [lo, hi].
 _EDGES_TO_NODES = np.zeros((SEGMENTS + 1, 2, SEGMENTS, _K))
 for _s in range(SEGMENTS):
@@ -91,14 +92,17 @@ def disc_probability_scalar(
     dx: float, dy: float, r: float, sx: float, sy: float, hx: float, hy: float
 ) -> float:
     """P(||d - z|| <= r) for one ego state (floats in, a float out; see the module docstring)."""
-    if abs(dx) > abs(dy):  # the outer axis is the one of least offset
+    ex, ey = min(sx, hx), min(sy, hy)
+    if (abs(dx) + ex) * (ex * ex) > (abs(dy) + ey) * (ey * ey):  # risk_env.risk.disc.outer_is_y
         dx, dy, sx, sy, hx, hy = dy, dx, sy, sx, hy, hx
     lim = SUPPORT * sx
-    # Segment edges in the disc angle t: the outer range's ends and breaks, then the chord's ends
-    # crossing the inner box edges (r cos t = |hy -+ dy|), clipped to the range and sorted.
+    # Segment edges in the disc angle t: the outer range's ends (cut to where the chord meets the
+    # inner box, within SUPPORT sigma) and breaks, then the chord's ends crossing the inner box
+    # edges (r cos t = |hy -+ dy|), clipped to the range and sorted.
+    meet = math.acos(_clip((abs(dy) - min(hy, SUPPORT * sy)) / r, 0.0, EDGE))
     ends = [math.asin(_clip((_clip(at, -lim, lim) - dx) / r, -EDGE, EDGE)) for at in (-hx, hx)]
-    t_lo = ends[0]
-    t_hi = max(ends[1], t_lo)
+    t_lo = max(ends[0], -meet)
+    t_hi = max(min(ends[1], meet), t_lo)
     inner = [math.asin(_clip((_clip(k * sx, -lim, lim) - dx) / r, -EDGE, EDGE)) for k in SIGMA_BREAKS]
     for gap in (abs(hy - dy), abs(hy + dy)):
         a = math.acos(_clip(gap / r, 0.0, EDGE))
@@ -157,25 +161,31 @@ def disc_probability_batch(
     """P(||d - z|| <= r) for B ego states: ``dx, dy (B,)``; ``sx, sy, hx, hy`` each ``(B,)`` or
     a scalar (one belief for every state); returns ``(B,)``. See the module docstring."""
     n = dx.shape[0]
-    # The outer axis is the one of least offset; by symmetry only |dx| and |dy| matter (dy >= 0
+    # The outer axis (risk_env.risk.disc.outer_is_y); by symmetry only |dx| and |dy| matter (dy >= 0
     # below). Arrays are laid out (entries, B), so every ufunc's inner loop runs over the states.
     dx, dy = np.abs(dx), np.abs(dy)
     if np.ndim(sx) or np.ndim(sy) or np.ndim(hx) or np.ndim(hy) or sx != sy or hx != hy:
-        swap = dx > dy
+        ex, ey = np.minimum(sx, hx), np.minimum(sy, hy)
+        swap = (dx + ex) * (ex * ex) > (dy + ey) * (ey * ey)
         sx, sy = np.where(swap, sy, sx), np.where(swap, sx, sy)
         hx, hy = np.where(swap, hy, hx), np.where(swap, hx, hy)
-    dx, dy = np.minimum(dx, dy), np.maximum(dx, dy)
+        dx, dy = np.where(swap, dy, dx), np.where(swap, dx, dy)
+    else:  # one round belief: the axis of least offset
+        dx, dy = np.minimum(dx, dy), np.maximum(dx, dy)
 
-    # Segment edges (13, B) in the disc angle t, as in disc_probability_scalar: sin t at the
-    # outer range's ends and breaks first.
+    # Segment edges (SEGMENTS + 1, B) in the disc angle t, as in disc_probability_scalar: sin t
+    # at the outer range's ends and breaks first; the range cut to where the chord meets the box.
     lim = SUPPORT * sx
     at = np.asarray(np.clip(_AT_H[:, None] * hx + _AT_S[:, None] * sx, -lim, lim) / r) - dx / r
     np.maximum(at, -EDGE, out=at)
     np.minimum(at, EDGE, out=at)
-    np.maximum(at[1], at[0], out=at[1])
     edges = np.empty((SEGMENTS + 1, n))
     np.arcsin(at[0], out=edges[0])
     np.arcsin(at[1], out=edges[-1])
+    meet = np.arccos(np.clip((dy - np.minimum(hy, SUPPORT * sy)) / r, 0.0, EDGE))
+    np.maximum(edges[0], -meet, out=edges[0])
+    np.minimum(edges[-1], meet, out=edges[-1])
+    np.maximum(edges[-1], edges[0], out=edges[-1])
     t_lo, t_hi = edges[0], edges[-1]
     inner = edges[1:-1]
     breaks = len(SIGMA_BREAKS)
@@ -260,8 +270,9 @@ def disc_probability_batch(
     # (bincount of no segments returns integers: multiply, not in place)
     missed = np.bincount(cols, weights=per_segment, minlength=n) * (0.5 * r * _INV_SQRT_2PI)
 
-    # The outer mass over the range [t_lo, t_hi] in closed form; at[:2] holds sin t_lo, sin t_hi.
-    x_ends = at[:2] * r
+    # The outer mass over the range [t_lo, t_hi] in closed form.
+    x_ends = np.sin(edges[[0, -1]])
+    x_ends *= r
     x_ends += dx
     x_ends /= sx
     special.ndtr(x_ends, out=x_ends)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -47,6 +48,18 @@ SeverityName = Literal["paper", "plastic", "probability", "injury"]
 SEVERITY_NAMES: tuple[str, ...] = ("paper", "plastic", "probability", "injury")
 RISK_TOLERANCES: tuple[float, ...] = (0.0, 500.0, 1000.0, 1500.0, 2000.0, 2500.0)
 """The paper's risk tolerances epsilon [J] (Table II)."""
+RISK_BOUNDS: Mapping[str, tuple[float, str]] = {
+    "paper": (math.inf, "J"),
+    "plastic": (math.inf, "J"),
+    "probability": (1.0, "probability"),
+    "injury": (2.0, "injuries"),
+}
+"""Per severity, the largest per-step risk and its unit (the models' ``upper_bound`` and ``unit``,
+:mod:`risk_env.severity`): a tolerance above the bound is a value in another unit."""
+MAX_MASS = 1e30
+"""The largest mass [kg] of the ego or an object (about the Sun's): beyond it a mass is a mistake,
+and the severities' products of masses and squared speeds near float overflow (1e308 kg made the
+risk inf and the reward NaN)."""
 OBJECT_KEYS: tuple[str, ...] = (
     *(f.name for f in dataclasses.fields(CrossingObject)),
     *UNCERTAINTY_FIELDS,
@@ -116,6 +129,13 @@ class Scenario:
             self, "risk_tolerance", checks.positive("risk_tolerance", self.risk_tolerance, strict=False)
         )
         checks.text("severity", self.severity, SEVERITY_NAMES)
+        bound, unit = RISK_BOUNDS[self.severity]
+        checks.within_severity("risk_tolerance", self.risk_tolerance, self.severity, bound, unit)
+        masses = [("ego.mass", self.ego.mass)]
+        masses += [(f"{object_label(i, len(self.objects))}.mass", o.mass) for i, o in enumerate(self.objects)]
+        for name, mass in masses:
+            if mass > MAX_MASS:
+                raise ValueError(f"{name} must be at most {MAX_MASS:g} kg, got {mass:g} kg")
         object.__setattr__(self, "injury_beta0", checks.finite("injury_beta0", self.injury_beta0))
         # harm grows with delta-v
         object.__setattr__(self, "injury_beta1", checks.positive("injury_beta1", self.injury_beta1))

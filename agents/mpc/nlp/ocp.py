@@ -80,6 +80,7 @@ from agents.mpc.nlp.parameters import (
     symbolic_uncertainty,
 )
 from risk_env.models.dynamics import casadi_step
+from risk_env.models.frame import to_frame
 from risk_env.models.ops import CASADI
 from risk_env.models.path import path_error, timing_law
 from risk_env.prediction.belief import Belief, predict
@@ -277,13 +278,14 @@ def assemble(
 
     def near_weight(x: Any, b: Any) -> Any:
         """A slack costs more where an object is likelier: 1 + NEAR_WEIGHT times the largest, over
-        the active slots, of a Gaussian bump at the slot's predicted mean (its belief's spread
-        widened by its r_e + r_o); >= 1, so the penalty stays exact."""
+        the active slots, of a Gaussian bump at the slot's predicted mean (its belief's spread,
+        in its frame, widened by its r_e + r_o); >= 1, so the penalty stays exact."""
         bumps = []
         for k in range(slots):
             q = b[k * Belief.SIZE : (k + 1) * Belief.SIZE]
             r2 = slot_numbers[k, 1] ** 2
-            z2 = (x[0] - q[0]) ** 2 / (q[4] ** 2 + r2) + (x[1] - q[1]) ** 2 / (q[5] ** 2 + r2)
+            along, across = to_frame(x[0] - q[0], x[1] - q[1], q[11], CASADI)
+            z2 = along**2 / (q[4] ** 2 + r2) + across**2 / (q[5] ** 2 + r2)
             bumps.append(ca.exp(-0.5 * z2) if slots == 1 else slot_numbers[k, 0] * ca.exp(-0.5 * z2))
         bump = bumps[0]
         for other in bumps[1:]:

@@ -69,6 +69,7 @@ from typing import Any
 import numpy as np
 
 from agents.mpc.nlp.parameters import TERMS
+from risk_env import checks
 
 ALLOCATIONS: tuple[str, ...] = ("share", "horizon")
 """How an SMPC spends its episode budget: ``"share"`` (default), each step may spend a share alpha
@@ -113,12 +114,9 @@ def check_weight(value: Any, name: str = "risk_weight") -> float | None:
 
 
 def _nonnegative(value: Any, name: str, what: str) -> float:
-    if isinstance(value, bool):
-        raise ValueError(f"{name} must be {what}, a finite number >= 0, got {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be {what}, a finite number >= 0, got {value!r}") from None
+    if not checks.is_real(value):  # a number of any real type; not a bool, not a string
+        raise TypeError(f"{name} must be {what}, a finite number >= 0, got {checks.describe(value)}")
+    number = float(value)
     if not (math.isfinite(number) and number >= 0.0):
         raise ValueError(f"{name} must be {what}, a finite number >= 0, got {value!r}")
     return number

@@ -55,6 +55,7 @@ from agents.mpc.nlp.ocp import (
     variable_bounds,
 )
 from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
+from risk_env import checks
 from risk_env.models.path import project
 from risk_env.scenario.scenario import Scenario
 
@@ -95,21 +96,16 @@ class SolverSettings:
             raise ValueError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
         if self.stage_cost not in STAGE_COSTS:
             raise ValueError(f"unknown stage_cost {self.stage_cost!r}; expected one of {STAGE_COSTS}")
-        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, int) or self.max_iter < 1:
-            raise ValueError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
-        if not (isinstance(self.tol, (int, float)) and self.tol > 0):
-            raise ValueError(f"tol must be > 0, got {self.tol!r}")
-        object.__setattr__(self, "tol", float(self.tol))
-        if isinstance(self.rungs, bool) or not isinstance(self.rungs, int) or self.rungs < 1:
-            raise ValueError(f"rungs must be an integer >= 1, got {self.rungs!r}")
-        if self.time_limit is not None and not (
-            isinstance(self.time_limit, (int, float)) and self.time_limit > 0
-        ):
-            raise ValueError(f"time_limit must be > 0 [s] (or None), got {self.time_limit!r}")
-        if not (isinstance(self.soft_penalty, (int, float)) and math.isfinite(self.soft_penalty)):
-            raise ValueError(f"soft_penalty must be a finite number > 0, got {self.soft_penalty!r}")
-        if self.soft_penalty <= 0:
-            raise ValueError(f"soft_penalty must be > 0, got {self.soft_penalty!r}")
+        # numbers of any real type (numpy's too), stored as Python's
+        object.__setattr__(self, "max_iter", checks.integer("max_iter", self.max_iter, minimum=1))
+        object.__setattr__(self, "tol", checks.positive("tol", self.tol))
+        object.__setattr__(self, "rungs", checks.integer("rungs", self.rungs, minimum=1))
+        if self.time_limit is not None:
+            limit = checks.real("time_limit", self.time_limit)
+            if not limit > 0:
+                raise ValueError(f"time_limit must be > 0 [s] (or None), got {self.time_limit!r}")
+            object.__setattr__(self, "time_limit", limit)
+        object.__setattr__(self, "soft_penalty", checks.positive("soft_penalty", self.soft_penalty))
 
     def key(self) -> tuple[Any, ...]:
         """What of the settings changes a built solver (not where compiled code is kept)."""
@@ -194,7 +190,7 @@ class Problem:
     rollout: ca.Function
     """(x_0 (NX,), inputs (NU, N)) -> states (NX, N): the model f, accumulated."""
     beliefs: ca.Function
-    """object measurement (5,) -> (N+1, 11) belief fields at n = 0..N (``Belief.as_array`` order)."""
+    """object measurement (5,) -> (N+1, Belief.SIZE) belief fields at n = 0..N (``Belief.as_array`` order)."""
     lbg: np.ndarray
     ubg: np.ndarray
     x_index: np.ndarray
