@@ -402,7 +402,7 @@ def test_highway_benchmarks_run_small(tmp_path):
     from benchmarks import highway_intersection, highway_render
 
     tiny = ["--episodes", "1", "--duration", "3", "--predictor", "constant", "--workers", "1"]
-    tiny += ["--max-solve-time", "inf", "--slots", "1"]  # the smallest MPC: the benchmark's plumbing is the point
+    tiny += ["--max-solve-time", "inf", "--slots", "1"]  # the smallest MPC: the plumbing is the point
     summary = highway_intersection.main([*tiny, "--agents", "rmpc,idm", "--out", str(tmp_path)])
     assert [s["agent"] for s in summary] == ["rmpc:worst_case", "idm"]
     for s in summary:
