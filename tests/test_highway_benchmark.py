@@ -314,6 +314,11 @@ def test_modes_are_drawn_in_their_frame_with_their_weight_as_opacity():
     turned = changed(_mode(0.9, 0.0, math.pi / 2))
     assert not np.array_equal(turned > 0, likely > 0)  # the boxes turned with their frame
     assert changed(_mode(0.0, 40.0, 0.0)).max() > 0  # a mode of weight 0 stays visible (MIN_OPACITY)
+    from risk_env.highway import highway_scenario
+    from risk_env.prediction.predictors import ConstantPredictor
+
+    mixture = ConstantPredictor(highway_scenario(env)).predict([0.0, 0.0, 0.3, 5.0, 0.0], 3)
+    assert changed(*mixture.modes).max() > 0  # a predictor's own mixture (Beliefs with their frame)
 
 
 @pytest.mark.slow
