@@ -32,7 +32,8 @@ lanes; ``constant``: the paper's; ``lane,constant`` runs each MPC with both, on 
 the IDM once. Reported per agent (:mod:`benchmarks.highway_tables`): collisions by kind
 (:mod:`benchmarks.highway_episodes`), goal rate, timeouts and deadlocks, with Wilson intervals;
 time to goal; fallback steps as a share of all steps; the realised episode risk of an SMPC with a
-budget against B; solve time per step as CPU and wall time (median / p95 / max); and the risk
+budget against B; solve time per step as CPU and wall time (median / p95 / max; the steps that
+built a new size of the MPC's problem are counted apart, not timed); and the risk
 scored by :class:`RiskCostWrapper` (exact, ``--severity``, the first predictor). Episodes run in a
 process pool (:mod:`benchmarks.sweep`, ``--workers``). Outputs in ``--out``: ``intersection.md``,
 ``intersection.csv`` (summary) and ``intersection_episodes.csv``, one output set
