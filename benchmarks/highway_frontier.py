@@ -97,6 +97,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             [-2, c], g, 102, color="tab:green", alpha=0.1, lw=0, label="beats the IDM on both axes"
         )
     curves: dict[str, list[tuple[float, float, float]]] = {}
+    tags: dict[tuple[float, float], list[float]] = {}
     for s in summary:
         kind, hollow = s["agent"].split(":")[0], s["predictor"] == "constant"
         label, marker, budget = _style(s)
@@ -106,7 +107,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
         ax.errorbar(x, y, xerr=[[x_lo], [x_hi]], yerr=[[y_lo], [y_hi]], fmt="none", ecolor=colour, alpha=0.35)
         if budget is not None:
             curves.setdefault(s["predictor"], []).append((budget, x, y))
-            ax.annotate(f"B={budget:g}", (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
+            tags.setdefault((round(x, 6), round(y, 6)), []).append(budget)
         ax.plot(
             x,
             y,
@@ -121,6 +122,9 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
     for pred, points in curves.items():
         _, xs, ys = zip(*sorted(points), strict=True)
         ax.plot(xs, ys, ls=PREDICTOR_STYLE.get(pred, ":"), color=COLOURS["smpc"], lw=1, alpha=0.7)
+    for (x, y), budgets in tags.items():  # budgets on the same point share one label
+        text = "B=" + ", ".join(f"{b:g}" for b in sorted(set(budgets)))
+        ax.annotate(text, (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=True))
     ax.legend(unique.values(), unique.keys(), fontsize=8, loc="lower right")
