@@ -2,10 +2,11 @@
 
 :func:`run_chunk` runs a pool job (an agent, a predictor, some seeds) and keeps its env and driver
 in the process between jobs; :func:`run_episode` drives one seeded episode and returns its row:
-the outcome (collision and its kind, goal, timeout, deadlock) and per-step arrays (the scored risk,
-each MPC step's wall and CPU time, whether every object slot was occupied, whether the step built
-an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`) with the episode risk an SMPC
-with a budget spent by its own estimator.
+the outcome (collision and its kind, goal, timeout, deadlock, whether the ego left the road: off
+every lane of highway-env's map, ``vehicle.on_road`` false, at some step's end) and per-step
+arrays (the scored risk, each MPC step's wall and CPU time, whether every object slot was
+occupied, whether the step built an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`)
+with the episode risk an SMPC with a budget spent by its own estimator.
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
@@ -100,6 +101,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     base = env.unwrapped
     risks, walls, cpus, full, builds = [], [], [], [], []
     times, speeds = [float(base.time)], [float(base.vehicle.speed)]
+    off_road = 0
     done, kind = False, ""
     while not done:
         known = built_problems()
@@ -116,6 +118,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         risks.append(info["risk"])
         times.append(float(base.time))
         speeds.append(float(base.vehicle.speed))
+        off_road += not base.vehicle.on_road
         done = terminated or truncated
         if base.vehicle.crashed and not kind:
             kind = crash_kind(base, before)
@@ -134,6 +137,8 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "timeout": not crashed and not goal,
         "deadlock": deadlocked(np.array(times), np.array(speeds), crashed, goal),
         "final_speed": speeds[-1],
+        "off_road": off_road > 0,
+        "off_road_steps": off_road,
         "risk_mean": float(risks.mean()) if len(risks) else 0.0,
         "risk_steps": risks,
         "solve_times": np.array(walls),

@@ -22,12 +22,12 @@ import numpy as np
 from benchmarks.highway_agents import resolve
 from benchmarks.sampled_rows import wilson
 
-RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout", "deadlock")
+RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road")
 """The per-episode outcomes counted, each with its rate and Wilson interval."""
 EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
-    "vehicle_into_ego", "goal", "timeout", "deadlock", "final_speed", "risk_mean", "fallbacks",
-    "spent_risk", "solve_ms_median", "cpu_ms_median", "build_steps",
+    "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road", "off_road_steps", "final_speed",
+    "risk_mean", "fallbacks", "spent_risk", "solve_ms_median", "cpu_ms_median", "build_steps",
 )  # fmt: skip
 """The columns of the per-episode CSV."""
 
@@ -127,7 +127,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f" predictor {args.predictor[0]}). The MPCs' wall-time cap per step: {cap}. Wall time"
         f" {wall:.0f} s on {args.workers or 'all'} worker(s); load average at the end (1 / 5 / 15"
         f" min): {load} on {os.cpu_count()} cores. Rates: % [Wilson 95 % interval]. Deadlock: no"
-        " collision, no goal, the ego stopped (< 0.1 m/s) over the last 10 s.",
+        " collision, no goal, the ego stopped (< 0.1 m/s) over the last 10 s. Left the road: off every"
+        " lane of the map at some step.",
         "",
     ]
     for s in summary:
@@ -135,14 +136,14 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
     lines += [
         "",
         "| agent | N | collisions | ego drove into a vehicle | a vehicle drove into the ego | goal |"
-        " timeout | deadlocks | time to goal [s] |",
-        "| " + " | ".join(["---"] * 9) + " |",
+        " timeout | deadlocks | left the road | time to goal [s] |",
+        "| " + " | ".join(["---"] * 10) + " |",
     ]
     for s in summary:
         lines.append(
             f"| {_who(s)} | {s['episodes']} | {_ci(s, 'collision')} | {_ci(s, 'ego_into_vehicle')} |"
             f" {_ci(s, 'vehicle_into_ego')} | {_ci(s, 'goal')} | {100 * s['timeout_rate']:.1f}% |"
-            f" {s['deadlock']} | {_f(s['time_to_goal_s'])} |"
+            f" {s['deadlock']} | {s['off_road']} | {_f(s['time_to_goal_s'])} |"
         )
     mpcs = [s for s in summary if s["agent"] != "idm"]
     if not mpcs:

@@ -128,7 +128,8 @@ def test_an_episode_records_every_column(tmp_path):
         assert s["collision"] + s["goal"] + s["timeout"] == 1
         assert s["ego_into_vehicle"] + s["vehicle_into_ego"] == s["collision"]
         assert s["deadlock"] == 0  # shorter than the 10 s a deadlock needs
-        for key in ("collision", "goal", "deadlock"):
+        assert s["off_road"] == 0
+        for key in ("collision", "goal", "deadlock", "off_road"):
             assert (s[f"{key}_ci_low"], s[f"{key}_ci_high"]) == pytest.approx(wilson(s[key], 1))
     for name in ("rmpc:worst_case", "smpc:exact:budget=0.05"):
         s = rows[name]
@@ -144,13 +145,13 @@ def test_an_episode_records_every_column(tmp_path):
     assert np.isnan(rows["idm"]["cpu_ms_median"])
     text = (tmp_path / "intersection.md").read_text()
     assert "episode budget 0.05, no per-step bound" in text and "solve CPU ms median / p95 / max" in text
-    assert "| deadlocks |" in text and "duration 1.5 s" in text
+    assert "| deadlocks | left the road |" in text and "duration 1.5 s" in text
     episodes = (tmp_path / "intersection_episodes.csv").read_text().splitlines()
     assert len(episodes) == 4 and "deadlock" in episodes[0] and "cpu_ms_median" in episodes[0]
     assert "steps that built an NLP" in text
 
 
-def test_a_step_that_builds_an_nlp_is_timed_apart(monkeypatch):
+def test_a_step_that_builds_an_nlp_is_timed_apart_and_leaving_the_road_counts(monkeypatch):
     from collections import OrderedDict
 
     from agents.mpc.nlp import solver
@@ -168,12 +169,16 @@ def test_a_step_that_builds_an_nlp_is_timed_apart(monkeypatch):
         def predict(self, observation):
             self.steps += 1
             cache.setdefault({1: "the agent's own", 2: "a new size"}.get(self.steps, "the agent's own"))
+            if self.steps == 3:  # and then leaves the road
+                env.unwrapped.vehicle.position = np.array([60.0, 60.0])
             return np.zeros(2, dtype=np.float32), None
 
     args = highway_intersection.parse_args(["--duration", "1.5", "--initial-vehicles", "0"])
-    row = run_episode(Driver(), make_env(args, "constant"), seed=0, slots=1)
+    env = make_env(args, "constant")
+    row = run_episode(Driver(), env, seed=0, slots=1)
     assert row["built"].tolist() == [False, True, False]
     assert row["cpu_times"].tolist() == [0.01] * 3
+    assert row["off_road"] and row["off_road_steps"] == 1
 
 
 def test_deadlocks_from_a_synthetic_record():
