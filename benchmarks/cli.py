@@ -193,6 +193,14 @@ def unit_interval_closed(text: str) -> float:
     return value
 
 
+def fraction(text: str) -> float:
+    """``type=`` of a share in (0, 1]."""
+    value = _number(text)
+    if not 0 < value <= 1:
+        raise argparse.ArgumentTypeError(f"expected a share in (0, 1], got {text!r}")
+    return value
+
+
 def discount(text: str) -> float:
     """``type=`` of a discount factor in (0, 1]."""
     value = _number(text)

@@ -1,302 +1,145 @@
 """Our agents in highway-env: RMPC and SMPC drive ``intersection-v2`` against highway-env's IDM.
 
     python -m benchmarks.highway_intersection --episodes 4 --agents rmpc,idm     # a quick look
-    python -m benchmarks.highway_intersection --episodes 200 --out docs/results/highway \\
-        --agents rmpc,smpc:probability:0.01,idm
+    python -m benchmarks.highway_intersection --episodes 200 --max-solve-time inf \\
+        --agents rmpc,smpc,smpc:probability:0.01,idm --out results/highway
+    python -m benchmarks.highway_intersection --episodes 200 --duration 40 --max-solve-time inf \\
+        --agents rmpc,smpc,idm --out results/highway/40s
+    python -m benchmarks.highway_intersection --episodes 20 --predictor lane,constant \\
+        --agents rmpc,smpc:budget=0.02 --initial-vehicles 5 --spawn-probability 0.3 --workers 1
 
 Each agent drives the controlled vehicle of ``intersection-v2`` (``--env intersection-v1``
 selectable; :data:`~risk_env.highway.adapter.INTERSECTION_CONFIG`: the kinematic vehicle with
-continuous actions, T = 0.5 s, highway-env's traffic, the left turn to ``"o1"``, 13 s) over the
-same seeded episodes (seeds S..S+E-1; the traffic then reacts to the ego). Agents (``--agents``,
-named as in every command, :mod:`benchmarks.agent_names`):
+continuous actions, T = 0.5 s, highway-env's traffic, the left turn to ``"o1"``) over the same
+seeded episodes (seeds S..S+E-1; the traffic then reacts to the ego). highway-env's own
+``duration`` (13 s), ``spawn_probability`` (0.6) and ``initial_vehicle_count`` (10) are set by
+``--duration``, ``--spawn-probability`` and ``--initial-vehicles``. Agents (``--agents``, named as
+in every command, :mod:`benchmarks.agent_names`; at the intersection as
+:mod:`benchmarks.highway_agents` reads them):
 
-- ``rmpc[:RISK]``: :class:`agents.RMPC` (default: worst case, exact box form) through
-  :class:`IntersectionAdapter` with ``--slots`` object slots (default 5): one solve plans against
-  every observed vehicle, the nearest first, up to the slot count;
-- ``smpc[:RISK][:SEVERITY:TOLERANCE]``: :class:`agents.SMPC` (default: exact risk) through the
-  adapter, with its own severity and epsilon (default: ``--severity``, ``--tolerance``), e.g.
-  ``smpc:probability:0.01`` (a collision chance of at most 1 % per step under the prediction) or
-  ``smpc:injury:0.001``;
+- ``rmpc[:RISK]``: :class:`agents.RMPC` (default: worst case) through :class:`IntersectionAdapter`
+  with ``--slots`` object slots (default 5): one solve plans against every observed vehicle, the
+  nearest first, up to the slot count, and against every predicted mode of weight at least
+  ``--mode-threshold``;
+- ``smpc[:RISK]``: :class:`agents.SMPC` (default: exact risk) with ``--severity`` (probability) and
+  an episode risk budget B = ``--budget`` (0.05: a 5 % chance of a collision per episode), no
+  per-step bound; ``smpc:budget=0.02`` another budget; ``smpc:probability:0.01`` the per-step
+  bound alone (a collision chance of at most 1 % per step under the prediction);
 - ``idm``: :class:`IDMEgo`, highway-env's ``IDMVehicle`` on the same route (its reference driver).
 
-**Collision kinds** (from the simulator's states at the start of the step that ended in the
-crash): with d the unit vector from the ego's centre to the centre of the vehicle it hit (the
-crashed vehicle nearest the ego), the ego's closing speed is ``v_e . d`` and the other's
-``-v_o . d`` (velocities along each heading). The ego *drove into* the vehicle when its closing
-speed exceeds the other's; otherwise the vehicle *drove into the ego* (rear-ended, or hit while
-stopped or yielding). Rates carry Wilson 95 % intervals.
-
-Reported per agent: collisions by kind, goal rate (arrived on the road to ``"o1"``), time to goal,
-timeouts, the MPC's fallbacks (soft or manoeuvre steps) per episode, solve time per step (median /
-p95 / max; and over the steps with every slot occupied), and the risk scored by
-:class:`RiskCostWrapper` (exact) with ``--severity``. Episodes run in a process pool
-(:mod:`benchmarks.sweep`, ``--workers``). Outputs in ``--out``: ``intersection.md``,
+The MPCs plan with each predictor of ``--predictor`` (``lane``: the routes along highway-env's
+lanes; ``constant``: the paper's; ``lane,constant`` runs each MPC with both, on the same seeds),
+the IDM once. Reported per agent (:mod:`benchmarks.highway_tables`): collisions by kind
+(:mod:`benchmarks.highway_episodes`), goal rate, timeouts and deadlocks, with Wilson intervals;
+time to goal; fallback steps as a share of all steps; the realised episode risk of an SMPC with a
+budget against B; solve time per step as CPU and wall time (median / p95 / max; the steps that
+built a new size of the MPC's problem are counted apart, not timed); and the risk
+scored by :class:`RiskCostWrapper` (exact, ``--severity``, the first predictor). Episodes run in a
+process pool (:mod:`benchmarks.sweep`, ``--workers``). Outputs in ``--out``: ``intersection.md``,
 ``intersection.csv`` (summary) and ``intersection_episodes.csv``, one output set
-(:mod:`benchmarks.output`; ``--resume`` goes on after an interruption).
+(:mod:`benchmarks.output`; ``--resume`` goes on after an interruption). The safety-progress
+frontier of a set of budgets is :mod:`benchmarks.highway_frontier`.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import functools
-import os
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from benchmarks import cli
-from benchmarks.agent_names import AgentName, parse_agent
-from benchmarks.sampled_rows import wilson
+from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, check_budget, resolve
+from benchmarks.highway_episodes import ENV_DEFAULTS, crash_kind, run_chunk
+from benchmarks.highway_tables import markdown, summarise, write_csvs
 from benchmarks.sweep import run_sweep
-from risk_env.risk.severity import check_tolerance
+from risk_env.prediction.predictors import PREDICTOR_NAMES
 from risk_env.scenario.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
-KINDS = ("rmpc", "smpc", "idm")
 FILES = ("intersection.csv", "intersection.md", "intersection_episodes.csv")
 """The files a run writes in ``--out``."""
 ENVS = ("intersection-v2", "intersection-v1")
 CHUNK = 5
 """Episodes per pool job (each process keeps its env and agents between jobs)."""
-_CACHE: dict[tuple[Any, ...], tuple[Any, Any]] = {}
+__all__ = ["crash_kind", "run", "add_options", "parse_args", "main"]
 
 
-def agent(spec: str, args: argparse.Namespace) -> AgentName:
-    """The agent ``spec`` names, an SMPC without its own severity and tolerance given ``--severity``
-    and ``--tolerance``."""
-    return parse_agent(spec, KINDS, budget=False).with_defaults(args.severity, args.tolerance)
+class Gone(argparse.Action):
+    """A flag of an earlier version whose meaning moved elsewhere: an error saying where."""
+
+    def __init__(self, option_strings: list[str], dest: str, where: str = "", **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+        self.where = where
+
+    def __call__(self, parser: Any, namespace: Any, values: Any, option_string: str | None = None) -> None:
+        parser.error(f"argument {option_string}: {self.where}")
 
 
-def label(spec: str, args: argparse.Namespace) -> str:
-    """``"smpc:injury:0.001"`` -> ``"SMPC (exact risk), injury severity, epsilon 0.001"``."""
-    a = agent(spec, args)
-    if a.kind == "idm":
-        return "highway-env IDM"
-    risk = a.variant.replace("_", " ")
-    if a.kind == "rmpc":
-        return f"RMPC ({risk} risk)"
-    return f"SMPC ({risk} risk), {a.severity} severity, epsilon {a.tolerance:g}"
+def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, out: Path) -> None:
+    """The options of the intersection commands, with the defaults ``agents``, ``predictors`` and
+    ``out``."""
+    from agents.mpc.nlp.risk_budget import BUDGET_SHARE
+    from agents.mpc.objects import MODE_THRESHOLD
 
-
-def make_driver(spec: str, env: Any, args: argparse.Namespace) -> Any:
-    """The driver ``spec`` (see the module docstring) for ``env``."""
-    from agents import RMPC, SMPC
-    from risk_env.highway import IDMEgo, IntersectionAdapter
-
-    a = agent(spec, args)
-    if a.kind == "idm":
-        return IDMEgo(env)
-    factory = functools.partial(RMPC if a.kind == "rmpc" else SMPC, risk=a.variant)
-    if args.max_solve_time is not None:
-        factory = functools.partial(factory, max_solve_time=args.max_solve_time)
-    return IntersectionAdapter(
-        env,
-        factory,
-        uncertainty=args.uncertainty,
-        risk_tolerance=args.tolerance if a.tolerance is None else a.tolerance,
-        severity=a.severity or args.severity,
-        slots=args.slots,
-    )
-
-
-def _states(base: Any) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """Position and velocity (along the heading) of every vehicle, by identity."""
-    out = {}
-    for v in base.road.vehicles:
-        vel = float(v.speed) * np.array([np.cos(v.heading), np.sin(v.heading)])
-        out[id(v)] = (np.array(v.position, dtype=float), vel)
-    return out
-
-
-def crash_kind(base: Any, before: dict[int, tuple[np.ndarray, np.ndarray]]) -> str:
-    """``"ego"`` (the ego drove into the vehicle) or ``"other"`` (it drove into the ego), from the
-    states ``before`` the crash step (see the module docstring)."""
-    ego = base.vehicle
-    hit = [v for v in base.road.vehicles if v is not ego and v.crashed] or [
-        v for v in base.road.vehicles if v is not ego
-    ]
-    other = min(hit, key=lambda v: float(np.hypot(*(v.position - ego.position))))
-    p_e, v_e = before.get(id(ego), (np.array(ego.position), np.zeros(2)))
-    p_o, v_o = before.get(id(other), (np.array(other.position), np.zeros(2)))
-    d = p_o - p_e
-    d = d / max(float(np.hypot(*d)), 1e-9)
-    return "ego" if float(v_e @ d) > float(-v_o @ d) else "other"
-
-
-def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
-    """One episode; returns its row (metrics and per-step arrays)."""
-    from risk_env.highway.adapter import reached
-
-    obs, _ = env.reset(seed=seed)
-    if hasattr(driver, "reset"):
-        driver.reset()
-    base = env.unwrapped
-    risks, times, full = [], [], []
-    done, kind = False, ""
-    while not done:
-        action, _ = driver.predict(obs)
-        if getattr(driver, "last_solve", None) is not None:
-            times.append(driver.last_solve_time)
-            full.append(len(driver.last_objects) >= slots)
-        before = _states(base)
-        obs, _, terminated, truncated, info = env.step(action)
-        risks.append(info["risk"])
-        done = terminated or truncated
-        if base.vehicle.crashed and not kind:
-            kind = crash_kind(base, before)
-    crashed = bool(base.vehicle.crashed)
-    goal = reached(env, driver.destination)
-    risks = np.array(risks)
-    return {
-        "seed": seed,
-        "steps": len(risks),
-        "time_s": float(base.time),
-        "collision": crashed,
-        "ego_into_vehicle": crashed and kind == "ego",
-        "vehicle_into_ego": crashed and kind == "other",
-        "goal": goal,
-        "timeout": not crashed and not goal,
-        "risk_mean": float(risks.mean()) if len(risks) else 0.0,
-        "risk_steps": risks,
-        "solve_times": np.array(times),
-        "full": np.array(full, dtype=bool),
-        "fallbacks": int(getattr(driver, "failures", 0)),
-    }
-
-
-def run_chunk(job: tuple[str, list[int], argparse.Namespace]) -> list[dict[str, Any]]:
-    """Episodes ``seeds`` of agent ``spec`` (a pool job; the env and driver kept per process)."""
-    spec, seeds, args = job
-    key = (spec, args.env, args.uncertainty, args.severity, args.tolerance, args.slots, args.max_solve_time)
-    if key not in _CACHE:
-        from risk_env.highway import RiskCostWrapper, make_intersection_env
-        from risk_env.highway.adapter import ADAPTER_DEFAULTS
-
-        radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
-        env = RiskCostWrapper(
-            make_intersection_env(version=args.env),
-            uncertainty=args.uncertainty,
-            estimator="exact",
-            risk_tolerance=args.tolerance,
-            severity=args.severity,
-            **radii,
-        )
-        _CACHE[key] = (env, make_driver(spec, env, args))
-    env, driver = _CACHE[key]
-    out = []
-    for seed in seeds:
-        row = run_episode(driver, env, seed, args.slots)
-        row.update(agent=spec)
-        out.append(row)
-    return out
-
-
-def _ci(k: int, n: int) -> str:
-    lo, hi = wilson(k, n)
-    return f"{100 * k / n:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"
-
-
-def summarise(spec: str, rows: list[dict[str, Any]], args: argparse.Namespace) -> dict[str, Any]:
-    """One agent's row of the summary table."""
-    n = len(rows)
-    solve = np.concatenate([r["solve_times"] for r in rows]) * 1e3
-    full = np.concatenate([r["full"] for r in rows]) if solve.size else np.zeros(0, bool)
-    goals = [r["time_s"] for r in rows if r["goal"]]
-    risk = np.concatenate([r["risk_steps"] for r in rows])
-
-    def stat(a: np.ndarray, q: float) -> float:
-        return float(np.percentile(a, q)) if a.size else float("nan")
-
-    out: dict[str, Any] = {"agent": spec, "label": label(spec, args), "episodes": n}
-    for key in ("collision", "ego_into_vehicle", "vehicle_into_ego"):
-        k = sum(r[key] for r in rows)
-        lo, hi = wilson(k, n)
-        out |= {key: k, f"{key}_rate": k / n, f"{key}_ci_low": lo, f"{key}_ci_high": hi}
-    fallbacks = np.array([r["fallbacks"] for r in rows])
-    return out | {
-        "goal_rate": sum(r["goal"] for r in rows) / n,
-        "timeout_rate": sum(r["timeout"] for r in rows) / n,
-        "time_to_goal_s": float(np.mean(goals)) if goals else float("nan"),
-        "fallbacks": int(fallbacks.sum()),
-        "fallbacks_per_episode": float(fallbacks.mean()),
-        "episodes_with_fallback": int(np.sum(fallbacks > 0)),
-        "risk_mean": float(risk.mean()) if risk.size else 0.0,
-        "solve_ms_median": stat(solve, 50),
-        "solve_ms_p95": stat(solve, 95),
-        "solve_ms_max": float(solve.max()) if solve.size else float("nan"),
-        "full_steps": int(full.sum()),
-        "full_solve_ms_median": stat(solve[full], 50),
-        "full_solve_ms_p95": stat(solve[full], 95),
-        "steps": int(risk.size),
-    }
-
-
-def _f(x: float, digits: int = 1) -> str:
-    return "-" if np.isnan(x) else f"{x:.{digits}f}"
-
-
-def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: float, command: str) -> str:
-    """The summary as a Markdown table with its settings and command."""
-    cap = "20 % of T (the default)" if args.max_solve_time is None else f"{args.max_solve_time:g} s"
-    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
-    lines = [
-        f"`{command}`",
-        "",
-        f"{args.env} (INTERSECTION_CONFIG), seeds {args.seed}..{args.seed + args.episodes - 1}"
-        f" (N = {args.episodes} per agent), uncertainty {args.uncertainty}, {args.slots} object slots;"
-        f" risk scored by RiskCostWrapper (exact, severity {args.severity}). Wall time {wall:.0f} s"
-        f" on {args.workers or 'all'} worker(s); the MPCs' wall-time cap per step: {cap}; the machine's"
-        f" load average at the end (1 / 5 / 15 min): {load} on {os.cpu_count()} cores (solve times are"
-        " wall times: other processes on the machine lengthen them). Collisions: % [Wilson 95 %"
-        " interval].",
-        "",
-        "| agent | N | collisions | ego drove into a vehicle | a vehicle drove into the ego | goal |"
-        " timeout | time to goal [s] | fallbacks (episodes with any) | solve ms median / p95 / max |"
-        f" solve ms, all {args.slots} slots occupied: median / p95 (steps) |",
-        "| " + " | ".join(["---"] * 11) + " |",
-    ]
-    for s in summary:
-        idm = s["agent"] == "idm"
-        n = s["episodes"]
-        solve = (
-            "-"
-            if idm
-            else f"{_f(s['solve_ms_median'])} / {_f(s['solve_ms_p95'])} / {_f(s['solve_ms_max'], 0)}"
-        )
-        full = (
-            "-"
-            if idm
-            else f"{_f(s['full_solve_ms_median'])} / {_f(s['full_solve_ms_p95'])} ({s['full_steps']})"
-        )
-        fb = "-" if idm else f"{s['fallbacks']} ({s['episodes_with_fallback']})"
-        lines.append(
-            f"| {s['agent']} | {n} | {_ci(s['collision'], n)} | {_ci(s['ego_into_vehicle'], n)} |"
-            f" {_ci(s['vehicle_into_ego'], n)} | {100 * s['goal_rate']:.1f}% |"
-            f" {100 * s['timeout_rate']:.1f}% |"
-            f" {_f(s['time_to_goal_s'])} | {fb} | {solve} | {full} |"
-        )
-    return "\n".join(lines) + "\n"
-
-
-def build_parser() -> argparse.ArgumentParser:
-    """The command line of ``python -m benchmarks.highway_intersection``."""
-    parser = cli.parser("highway_intersection", __doc__)
     parser.add_argument("--episodes", type=cli.positive_int, default=200, help="seeded episodes per agent")
     parser.add_argument("--seed", type=cli.nonnegative_int, default=0, help="first seed")
     parser.add_argument("--env", choices=ENVS, default=ENVS[0], help="highway-env intersection")
     parser.add_argument(
         "--agents",
-        type=cli.agents_list(KINDS, budget=False),
-        default="rmpc,smpc:probability:0.01,idm",
-        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE], idm",
+        type=cli.agents_list(KINDS),
+        default=agents,
+        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B], idm",
+    )
+    parser.add_argument(
+        "--predictor",
+        type=cli.choices_list(PREDICTOR_NAMES, "predictor"),
+        default=predictors,
+        help="the MPCs' predictor, or a comma list (each MPC runs with each; the first scores the risk)",
+    )
+    parser.add_argument("--duration", type=cli.positive_float, default=ENV_DEFAULTS["duration"],
+                        help="episode length [s] (highway-env's duration)")  # fmt: skip
+    parser.add_argument(
+        "--spawn-probability",
+        type=cli.unit_interval_closed,
+        default=ENV_DEFAULTS["spawn_probability"],
+        help="chance of a new vehicle per step (highway-env's spawn_probability)",
+    )
+    parser.add_argument(
+        "--initial-vehicles",
+        type=cli.nonnegative_int,
+        default=int(ENV_DEFAULTS["initial_vehicle_count"]),
+        help="vehicles at the start (highway-env's initial_vehicle_count)",
+    )
+    parser.add_argument(
+        "--budget",
+        type=cli.nonnegative_float,
+        default=DEFAULT_BUDGET,
+        help="episode risk budget B of an SMPC named without a tolerance or budget [--severity's unit]",
+    )
+    parser.add_argument(
+        "--budget-share",
+        type=cli.fraction,
+        default=BUDGET_SHARE,
+        help="share of what is left of the budget a step may spend (the SMPC's budget_share)",
+    )
+    parser.add_argument(
+        "--mode-threshold",
+        type=cli.unit_interval_closed,
+        default=MODE_THRESHOLD,
+        help="w_min: the RMPC plans against every predicted mode of at least this weight",
     )
     parser.add_argument("--slots", type=cli.positive_int, default=5, help="the MPC's object slots")
     parser.add_argument("--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="Table I level")
-    parser.add_argument("--severity", choices=SEVERITY_NAMES, default="probability", help="severity model")
     parser.add_argument(
-        "--tolerance", type=cli.nonnegative_float, default=0.01, help="epsilon [units of the severity]"
+        "--severity",
+        choices=SEVERITY_NAMES,
+        default="probability",
+        help="the SMPCs' and the score's severity",
+    )
+    parser.add_argument(
+        "--tolerance",
+        action=Gone,
+        where="gone: name the SMPC's per-step bound in the agent, e.g. --agents smpc:probability:0.01",
     )
     parser.add_argument(
         "--max-solve-time",
@@ -308,53 +151,77 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--workers", type=cli.positive_int, default=None, help="processes (default: all cores)"
     )
-    cli.add_output_options(parser, Path("results/highway"), "output folder", resume=True)
+    cli.add_output_options(parser, out, "output folder", resume=True)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.highway_intersection``."""
+    parser = cli.parser("highway_intersection", __doc__)
+    add_options(parser, "rmpc,smpc,idm", PREDICTOR_NAMES[1], Path("results/highway"))
     return parser
 
 
 def parse_args(
     argv: list[str] | None = None, parser: argparse.ArgumentParser | None = None
 ) -> argparse.Namespace:
+    """The options, checked (every bad value an error naming its flag, before any episode)."""
     parser = parser or build_parser()
     args = parser.parse_args(argv)
     try:
-        check_tolerance(args.tolerance, args.severity, "argument --tolerance:")
+        check_budget(args.budget, args.severity, "argument --budget: the budget")
     except ValueError as error:
         parser.error(str(error))
-    args.agents = [str(agent(str(a), args)) for a in args.agents]
+    check_duration(parser, args.duration, "--duration")
+    if len(set(args.predictor)) != len(args.predictor):
+        parser.error(f"argument --predictor: a predictor is named twice ({','.join(args.predictor)})")
+    try:
+        agents = [resolve(a, args.severity, args.budget) for a in args.agents]
+    except ValueError as error:
+        parser.error(f"argument --agents: {error}")
+    args.agents = [a.name for a in agents]
     if len(set(args.agents)) != len(args.agents):
         parser.error(f"argument --agents: an agent is named twice ({', '.join(args.agents)})")
     return args
+
+
+def check_duration(parser: argparse.ArgumentParser, duration: float, flag: str) -> None:
+    """A usage error naming ``flag`` unless ``duration`` [s] holds at least one step."""
+    from risk_env.highway.adapter import INTERSECTION_CONFIG
+
+    step = 1.0 / INTERSECTION_CONFIG["policy_frequency"]
+    if duration < step:
+        parser.error(f"argument {flag}: {duration:g} s is shorter than one step ({step:g} s)")
+
+
+def plan_runs(agents: list[str], predictors: list[str]) -> list[tuple[str, str]]:
+    """The runs ``(agent, predictor)`` of a command: each MPC with each predictor, in the order
+    given, the IDM once (predictor ``""``)."""
+    return [(name, p) for name in agents for p in (predictors if name != "idm" else [""])]
+
+
+def run(args: argparse.Namespace, out: Any) -> tuple[list[dict[str, Any]], list[dict[str, Any]], float]:
+    """Every agent's episodes (each MPC with each predictor, the IDM once) in the output set
+    ``out``'s chunk store: the summary rows, the episode rows and the wall time [s]."""
+    seeds = list(range(args.seed, args.seed + args.episodes))
+    runs = plan_runs(args.agents, args.predictor)
+    jobs = [(name, p, seeds[i : i + CHUNK], args) for name, p in runs for i in range(0, len(seeds), CHUNK)]
+    t0 = time.perf_counter()
+    chunks = run_sweep(run_chunk, jobs, workers=args.workers, desc=args.env, store=out.store)
+    rows: dict[tuple[str, str], list[dict[str, Any]]] = {r: [] for r in runs}
+    for (name, p, _, _), chunk in zip(jobs, chunks, strict=True):
+        rows[name, p] += chunk
+    wall = time.perf_counter() - t0
+    summary = [summarise(name, p, rows[name, p], args) for name, p in runs]
+    return summary, [r for key in runs for r in rows[key]], wall
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     parser = build_parser()
     args = parse_args(argv, parser)
     out = cli.open_output(parser, args, "intersection", FILES, argv)
-    seeds = list(range(args.seed, args.seed + args.episodes))
-    jobs = [(spec, seeds[i : i + CHUNK], args) for spec in args.agents for i in range(0, len(seeds), CHUNK)]
     with out:
-        t0 = time.perf_counter()
-        chunks = run_sweep(run_chunk, jobs, workers=args.workers, desc=args.env, store=out.store)
-        rows: dict[str, list[dict[str, Any]]] = {spec: [] for spec in args.agents}
-        for (spec, _, _), chunk in zip(jobs, chunks, strict=True):
-            rows[spec] += chunk
-        wall = time.perf_counter() - t0
-        summary = [summarise(spec, rows[spec], args) for spec in args.agents]
-        with open(out.dir / "intersection.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(summary[0]))
-            writer.writeheader()
-            writer.writerows(summary)
-        fields = ["agent", "seed", "steps", "time_s", "collision", "ego_into_vehicle", "vehicle_into_ego",
-                  "goal", "timeout", "risk_mean", "fallbacks"]  # fmt: skip
-        with open(out.dir / "intersection_episodes.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=[*fields, "solve_ms_median"])
-            writer.writeheader()
-            for spec in args.agents:
-                for r in rows[spec]:
-                    solve = r["solve_times"]
-                    median = float(np.median(solve)) * 1e3 if solve.size else ""
-                    writer.writerow({k: r[k] for k in fields} | {"solve_ms_median": median})
+        summary, rows, wall = run(args, out)
+        write_csvs(out.dir, "intersection", summary, rows)
         text = markdown(summary, args, wall, out.command_line.strip())
         (out.dir / "intersection.md").write_text(text)
     print(text)

@@ -2,6 +2,7 @@
 
     python -m benchmarks.highway_render                   # the paper's episode, to results/highway
     python -m benchmarks.highway_render --out docs/results/highway --estimator monte_carlo --intersection
+    python -m benchmarks.highway_render --intersection --intersection-agent smpc --predictor constant
 
 1. The paper's episode: ``RiskCrossing-v0`` with ``renderer="highway"``, driven by an agent
    (``--agent rmpc[:RISK]``: :class:`agents.RMPC`, or ``smpc[:RISK]``; :mod:`benchmarks.agent_names`)
@@ -9,11 +10,15 @@
    (:func:`benchmarks.rollout.rollout`); before each step the agent's plan is set on the env and a
    frame drawn. Saved as ``riskcrossing_<agent>_<uncertainty>.gif`` (``--fps`` frames per second;
    ``--estimator monte_carlo`` adds the env's Monte Carlo draws to the frames).
-2. ``--intersection``: one ``intersection-v1`` episode (seed ``--intersection-seed``) driven by the
-   same kind of agent through :class:`risk_env.highway.IntersectionAdapter`, drawn with
-   :func:`risk_env.highway.graphics.render_scene`: the route, the nearest planned-for vehicle's
-   truncation boxes and the MPC's plan. Saved as ``intersection_<agent>.gif`` and, for the step
-   where the ego came closest to that vehicle, ``intersection_frame.png``.
+2. ``--intersection``: one ``intersection-v2`` episode (seed ``--intersection-seed``, length
+   ``--intersection-duration``) driven by ``--intersection-agent`` (named as in
+   :mod:`benchmarks.highway_intersection`: ``rmpc``, ``smpc`` with the episode budget 0.05,
+   ``smpc:probability:0.01``, ...) through :class:`risk_env.highway.IntersectionAdapter` with
+   ``--predictor``, drawn with :func:`risk_env.highway.graphics.render_scene`: the route, the MPC's
+   plan and every planned-for vehicle's predicted modes (each mode's truncation boxes in its own
+   frame, its weight as opacity; :func:`risk_env.highway.graphics.draw_mixtures`). Saved as
+   ``intersection_<agent>.gif`` (``_constant`` added for the paper's predictor) and, for the step
+   where the ego came closest to the nearest planned-for vehicle, ``intersection_frame.png``.
 
 Headless: frames are drawn on plain surfaces (no display needed). The files are one output set
 (:mod:`benchmarks.output`).
@@ -22,7 +27,6 @@ Headless: frames are drawn on plain surfaces (no display needed). The files are 
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 from pathlib import Path
 from typing import Any
@@ -33,6 +37,7 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
 from benchmarks import cli  # noqa: E402
 from benchmarks.agent_names import parse_agent  # noqa: E402
+from risk_env.prediction.predictors import PREDICTOR_NAMES  # noqa: E402
 
 FILES = ("riskcrossing_*.gif", "intersection_*.gif", "intersection_frame.png")
 """The files a run may write in ``--out``."""
@@ -123,43 +128,43 @@ def paper_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], Any]:
 
 
 def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], int, dict[str, Any]]:
-    """Frames of one intersection-v1 episode, the index of the closest approach, a summary."""
-    from risk_env.highway import IntersectionAdapter, RiskCostWrapper, make_intersection_env
-    from risk_env.highway.adapter import ADAPTER_DEFAULTS, reached
+    """Frames of one intersection-v2 episode, the index of the closest approach, a summary."""
+    from benchmarks.highway_agents import make_driver, resolve
+    from benchmarks.highway_episodes import make_env
+    from risk_env.highway.adapter import reached
     from risk_env.highway.graphics import render_scene
-    from risk_env.prediction.belief import predict
+    from risk_env.prediction.predictors import ConstantPredictor
 
-    radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
-    env = RiskCostWrapper(
-        make_intersection_env(), uncertainty=args.uncertainty, risk_tolerance=args.tolerance, **radii
-    )
-    adapter = IntersectionAdapter(
-        env,
-        functools.partial(make_agent, args.agent),
-        uncertainty=args.uncertainty,
-        risk_tolerance=args.tolerance,
-    )
+    options = intersection_options(args)
+    env = make_env(options, args.predictor)
+    agent = resolve(args.intersection_agent, options.severity, options.budget)
+    adapter = make_driver(agent, env, options, args.predictor)
     obs, info = env.reset(seed=args.intersection_seed)
     frames, gaps, done, k = [], [], False, 0
     while not done:
         action, _ = adapter.predict(obs)
         ego, report = env.unwrapped.vehicle, adapter.last_solve
-        nearest = adapter.last_objects[:1]  # the nearest vehicle planned against (none: empty)
+        scenario = adapter.scenario
+        predictor = adapter.predictor or ConstantPredictor(scenario)
+        objects = adapter.last_objects  # every vehicle planned against, nearest first
+        mixtures = predictor.predict_scene(objects, scenario.horizon) if len(objects) else []
+        spent = "" if agent.budget is None else f", spent {adapter.spent_risk():.3g} of B = {agent.budget:g}"
         frames.append(
             render_scene(
                 env,
                 route=adapter.route.polyline(),
-                beliefs=[b for obj in nearest for b in predict(adapter.scenario, obj)[1:]],
+                mixtures=mixtures,
                 plan=report.ego_trajectory,
-                highlight=None if not len(nearest) else (*nearest[0][:2], adapter.scenario.object.radius),
+                highlight=None if not len(objects) else (*objects[0][:2], scenario.object.radius),
                 status=(
-                    f"k = {k}  t = {k * adapter.dt:.1f} s  {args.agent} on lane {adapter.lane}",
-                    f"risk = {info['risk']:.3g} (all vehicles, eps = {args.tolerance:g})",
-                    f"solve {1e3 * report.solve_time:.1f} ms, {report.variant}",
+                    f"k = {k}  t = {k * adapter.dt:.1f} s  {agent.name} ({args.predictor}),"
+                    f" lane {adapter.lane}",
+                    f"risk = {info['risk']:.3g} (scored, all vehicles){spent}",
+                    f"solve {1e3 * report.cpu_time:.1f} ms CPU, {report.variant}; modes: weight = opacity",
                 ),
             )
         )
-        gaps.append(float(np.hypot(*(ego.position - nearest[0][:2]))) if len(nearest) else np.inf)
+        gaps.append(float(np.hypot(*(ego.position - objects[0][:2]))) if len(objects) else np.inf)
         obs, _, terminated, truncated, info = env.step(action)
         done, k = terminated or truncated, k + 1
     summary = {
@@ -169,6 +174,25 @@ def intersection_episode(args: argparse.Namespace) -> tuple[list[np.ndarray], in
     }
     env.close()
     return frames, int(np.argmin(gaps)), summary
+
+
+def intersection_options(args: argparse.Namespace) -> argparse.Namespace:
+    """The options of :mod:`benchmarks.highway_intersection` for the episode: its defaults, with
+    this command's ``--uncertainty``, ``--predictor`` and ``--intersection-duration``."""
+    from benchmarks import highway_intersection
+
+    argv = ["--uncertainty", args.uncertainty, "--predictor", args.predictor]
+    options = highway_intersection.build_parser().parse_args(argv)
+    options.duration = args.intersection_duration
+    return options
+
+
+def intersection_tag(args: argparse.Namespace) -> str:
+    """The intersection GIF's name part: ``rmpc``, ``smpc_budget_0.05``, ... and ``_constant``
+    for the paper's predictor."""
+    name = args.intersection_agent.replace(":exact", "").replace(":worst_case", "")
+    tag = name.replace(":", "_").replace("=", "_")
+    return tag + ("" if args.predictor == "lane" else f"_{args.predictor}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -200,9 +224,28 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--max-steps", type=cli.positive_int, default=80, help="episode step limit of the paper's episode"
     )
-    parser.add_argument("--intersection", action="store_true", help="also an intersection-v1 episode")
+    parser.add_argument("--intersection", action="store_true", help="also an intersection-v2 episode")
     parser.add_argument(
-        "--intersection-seed", type=cli.nonnegative_int, default=0, help="seed of the intersection-v1 episode"
+        "--intersection-seed", type=cli.nonnegative_int, default=0, help="seed of the intersection-v2 episode"
+    )
+    parser.add_argument(
+        "--intersection-agent",
+        type=cli.agents_list(("rmpc", "smpc")),
+        default="rmpc",
+        help="who drives the intersection: rmpc[:RISK] or smpc[...] as in highway_intersection"
+        " (smpc: the episode budget 0.05)",
+    )
+    parser.add_argument(
+        "--predictor",
+        choices=PREDICTOR_NAMES,
+        default="lane",
+        help="the intersection agent's predictor (its modes are drawn)",
+    )
+    parser.add_argument(
+        "--intersection-duration",
+        type=cli.positive_float,
+        default=13.0,
+        help="length of the intersection episode [s] (highway-env's duration)",
     )
     return parser
 
@@ -215,6 +258,16 @@ def parse_args(
     if len(args.agent) != 1:
         parser.error("argument --agent: one agent, not a list")
     args.agent = str(args.agent[0])
+    if len(args.intersection_agent) != 1:
+        parser.error("argument --intersection-agent: one agent, not a list")
+    from benchmarks.highway_agents import DEFAULT_BUDGET, resolve
+    from benchmarks.highway_intersection import check_duration
+
+    try:
+        args.intersection_agent = resolve(args.intersection_agent[0], "probability", DEFAULT_BUDGET).name
+    except ValueError as error:
+        parser.error(f"argument --intersection-agent: {error}")
+    check_duration(parser, args.intersection_duration, "--intersection-duration")
     from risk_env.risk.severity import check_tolerance
 
     try:
@@ -237,7 +290,7 @@ def main(argv: list[str] | None = None) -> list[Path]:
             from PIL import Image
 
             frames, closest, summary = intersection_episode(args)
-            gif = save_gif(frames, out.dir / f"intersection_{tag}.gif", args.fps)
+            gif = save_gif(frames, out.dir / f"intersection_{intersection_tag(args)}.gif", args.fps)
             Image.fromarray(frames[closest]).save(out.dir / "intersection_frame.png")
             lines.append(
                 f"{args.out / gif.name}: {len(frames)} frames, {summary};"

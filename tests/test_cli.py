@@ -152,6 +152,7 @@ SMALLEST = {
     "vector_speed": {"--steps": "1", "--repeats": "1", "--num-envs": "1"},
     "exact_accuracy": {"--beliefs": "20"},
     "highway_intersection": {"--episodes": "1", "--workers": "1"},
+    "highway_frontier": {"--episodes": "1", "--workers": "1"},
     "highway_render": {"--max-steps": "2"},
     "prediction": {"--episodes": "1", "--duration": "1", "--workers": "1"},
     "train_ppo": {
@@ -237,6 +238,7 @@ NUMBERS = {
     "finite_float": ["nan", "inf", "-inf", "x", ""],
     "unit_interval_closed": ["-0.1", "1.5", "nan", "x"],
     "discount": ["0", "2", "-1", "nan", "x"],
+    "fraction": ["0", "1.5", "-0.5", "nan", "x"],
     "time_cap": ["0", "-1", "nan", "x", ""],
 }
 """Bad values of each checked ``type=`` of :mod:`benchmarks.cli`."""

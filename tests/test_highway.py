@@ -244,7 +244,7 @@ def test_intersection_v1_stays_selectable():
 def test_crash_kind_from_the_closing_speeds():
     from types import SimpleNamespace
 
-    from benchmarks.highway_intersection import crash_kind
+    from benchmarks.highway_episodes import crash_kind
 
     ego = SimpleNamespace(position=np.array([0.0, 0.0]), crashed=True)
     other = SimpleNamespace(position=np.array([4.0, 0.0]), crashed=True)
@@ -401,22 +401,9 @@ def test_highway_benchmarks_run_small(tmp_path):
 
     from benchmarks import highway_intersection, highway_render
 
-    summary = highway_intersection.main(
-        [
-            "--episodes",
-            "1",
-            "--agents",
-            "rmpc,idm",
-            "--workers",
-            "1",
-            "--out",
-            str(tmp_path),
-            "--max-solve-time",
-            "inf",
-            "--slots",
-            "1",  # the smallest MPC: the benchmark's plumbing is the point
-        ]
-    )
+    tiny = ["--episodes", "1", "--duration", "3", "--predictor", "constant", "--workers", "1"]
+    tiny += ["--max-solve-time", "inf", "--slots", "1"]  # the smallest MPC: the plumbing is the point
+    summary = highway_intersection.main([*tiny, "--agents", "rmpc,idm", "--out", str(tmp_path)])
     assert [s["agent"] for s in summary] == ["rmpc:worst_case", "idm"]
     for s in summary:
         assert s["episodes"] == 1 and s["collision_rate"] + s["goal_rate"] + s[

@@ -250,6 +250,12 @@ class IntersectionAdapter:
         """Failed solves this episode, over every lane's agent."""
         return sum(getattr(a, "failures", 0) for a in self._agents.values())
 
+    def spent_risk(self) -> float:
+        """The episode's risk spent so far by its agents' own estimators: the sum of every lane
+        agent's ``spent_risk()`` (an SMPC with a budget; 0 for the others). Each lane's agent
+        counts from its hand-over (its episode starts there), so an episode budget B holds per lane."""
+        return float(sum(a.spent_risk() for a in self._agents.values() if hasattr(a, "spent_risk")))
+
     def reset(self) -> None:
         """Forget the episode: the next ``predict`` reads the route anew."""
         self._vehicle = None

@@ -36,6 +36,7 @@ from highway_env.vehicle.kinematics import Vehicle  # noqa: E402
 
 from risk_env.models.path import point  # noqa: E402
 from risk_env.prediction.belief import Belief, predict, predict_array  # noqa: E402
+from risk_env.prediction.mixture import Mixture  # noqa: E402
 from risk_env.render.rendering import BEYOND_GOAL, SIZE, Renderer, blend, frame_array  # noqa: E402
 from risk_env.scenario.scenario import Scenario  # noqa: E402
 
@@ -51,6 +52,8 @@ ROUTE = (180, 230, 255)
 DISC = (255, 255, 255)
 TEXT = (20, 20, 20)
 TEXT_BACKGROUND = (235, 235, 235)
+MIN_OPACITY = 0.15
+"""Smallest opacity of a drawn mode (its weight otherwise)."""
 SAMPLE_SEED = 0
 """Seed of the renderer's generator for the Monte Carlo draws it shows."""
 
@@ -108,6 +111,40 @@ def draw_beliefs(surface: WorldSurface, beliefs: Sequence[Belief]) -> None:
         rect = pygame.Rect(min(u0, u1), min(w0, w1), max(abs(u1 - u0), 1), max(abs(w1 - w0), 1))
         pygame.draw.rect(surface, colour, rect, 2)
         pygame.draw.circle(surface, colour, surface.vec2pix((x, y)), 3)
+
+
+def box_corners(x: float, y: float, half_x: float, half_y: float, frame: float) -> np.ndarray:
+    """The corners ``(4, 2)`` [m] of the box ``+-half_x`` along the axis at angle ``frame`` [rad]
+    and ``+-half_y`` across it, centred at ``(x, y)``."""
+    c, s = math.cos(frame), math.sin(frame)
+    local = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]]) * np.array([half_x, half_y])
+    return np.array([x, y]) + local @ np.array([[c, s], [-s, c]])
+
+
+def draw_mixtures(
+    surface: WorldSurface, mixtures: Sequence[Mixture], min_opacity: float = MIN_OPACITY
+) -> None:
+    """Every mode of every mixture over n = 1..N: its truncation boxes in the mode's own frame
+    (the belief's ``frame`` [rad], 0 when it has none: the world's axes) and its means joined,
+    near dark orange to far pale, with the mode's weight as opacity (at least ``min_opacity``, so
+    an unlikely mode stays visible). Drawn on a transparent layer blended onto ``surface``."""
+    layer = pygame.Surface(surface.get_size(), pygame.SRCALPHA)
+    for mixture in mixtures:
+        for mode in sorted(mixture.modes, key=lambda m: m.weight):  # the likeliest on top
+            alpha = round(255 * max(min_opacity, min(1.0, float(mode.weight))))
+            b = mode.beliefs
+            frames = np.broadcast_to(np.asarray(getattr(b, "frame", 0.0), dtype=float), np.shape(b.x))
+            steps = len(np.atleast_1d(b.x)) - 1
+            means = []
+            for n in range(steps, 0, -1):
+                colour = (*blend(BOX_NEAR, BOX_FAR, (n - 1) / max(steps - 1, 1)), alpha)
+                x, y = float(b.x[n]), float(b.y[n])
+                corners = box_corners(x, y, float(b.half_x[n]), float(b.half_y[n]), float(frames[n]))
+                pygame.draw.polygon(layer, colour, [surface.vec2pix(p) for p in corners], 2)
+                means.append(surface.vec2pix((x, y)))
+            if len(means) > 1:
+                pygame.draw.lines(layer, (*BOX_NEAR, alpha), False, means, 2)
+    surface.blit(layer, (0, 0))
 
 
 def draw_samples(surface: WorldSurface, draws: np.ndarray) -> None:
@@ -242,10 +279,12 @@ def render_scene(
     beliefs: Sequence[Belief] | None = None,
     highlight: Sequence[float] | None = None,
     status: Sequence[str] = (),
+    mixtures: Sequence[Mixture] | None = None,
 ) -> np.ndarray:
     """A frame ``(H, W, 3)`` uint8 of a highway-env env's road and traffic, in highway-env's own
-    frame (y down), with overlays: a ``route (M, 2)`` line, the ``beliefs`` (boxes), a ``plan
-    (M, 2)``, a disc outline around the point ``highlight (3,) = (x, y, radius)``, status text.
+    frame (y down), with overlays: a ``route (M, 2)`` line, the ``beliefs`` (boxes), the
+    ``mixtures``' modes (:func:`draw_mixtures`), a ``plan (M, 2)``, a disc outline around the point
+    ``highlight (3,) = (x, y, radius)``, status text.
     The controlled vehicle is drawn in highway-env's ego colour (green; red once crashed).
     ``scaling`` [px/m] defaults to the env's, ``centre`` [m] to the controlled vehicle."""
     base = getattr(env, "unwrapped", env)
@@ -261,6 +300,8 @@ def render_scene(
         draw_polyline(world, route, ROUTE, 1, dots=False)
     if beliefs is not None:
         draw_beliefs(world, beliefs)
+    if mixtures is not None:
+        draw_mixtures(world, mixtures)
     ego = base.vehicle
     own = getattr(ego, "color", None) if ego is not None else None
     if ego is not None and not ego.crashed:

@@ -1,0 +1,159 @@
+"""The agents of the intersection commands: what each name means there, its label, its driver.
+
+Names follow :mod:`benchmarks.agent_names`; at the intersection they read:
+
+- ``rmpc[:RISK]``: :class:`agents.RMPC`, robust against every predicted mode of weight at least
+  ``--mode-threshold`` of every planned-for vehicle;
+- ``smpc[:RISK]`` (no further part): :class:`agents.SMPC` with the command's ``--severity`` and an
+  episode risk budget B = ``--budget``, no per-step bound (``risk_tolerance=inf``: the budget
+  alone); ``smpc[:RISK]:budget=B`` the same with budget B;
+- ``smpc[:RISK]:SEVERITY:TOLERANCE``: the per-step bound epsilon alone (no budget), e.g.
+  ``smpc:probability:0.01``; ``...:budget=B`` adds a budget to it;
+- ``idm``: :class:`risk_env.highway.IDMEgo`, highway-env's own driver on the ego's route.
+
+A budget is finite and >= 0 and, in the probability severity, at most 1 (a chance per episode).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from benchmarks.agent_names import AgentName, number, parse_agent
+
+KINDS = ("rmpc", "smpc", "idm")
+"""The kinds of agent the intersection commands run."""
+DEFAULT_BUDGET = 0.05
+"""B of the plain ``smpc`` [the severity's unit per episode]: a 5 % chance of a collision per
+episode in the probability severity."""
+
+
+@dataclass(frozen=True)
+class HighwayAgent:
+    """An agent as the intersection commands run it: every part resolved."""
+
+    kind: str
+    """``rmpc``, ``smpc`` or ``idm``."""
+    variant: str = ""
+    """The risk estimator (``worst_case``, ``exact``, ...); empty for ``idm``."""
+    severity: str = ""
+    """The SMPC's severity (the command's ``--severity`` unless named)."""
+    tolerance: float = math.inf
+    """The SMPC's per-step bound epsilon [the severity's unit]; ``inf``: none."""
+    budget: float | None = None
+    """The SMPC's episode risk budget B [the severity's unit]; None: none."""
+
+    @property
+    def name(self) -> str:
+        """The full name, as the tables print it (``smpc:exact:budget=0.05``,
+        ``smpc:exact:probability:0.01``); it reads back as this agent with the same ``--severity``."""
+        step = math.isfinite(self.tolerance)
+        return str(
+            AgentName(
+                self.kind,
+                self.variant,
+                self.severity if step else None,
+                self.tolerance if step else None,
+                self.budget,
+            )
+        )
+
+    @property
+    def label(self) -> str:
+        """What the agent is, in words: ``"SMPC (exact risk), probability severity, episode budget
+        0.05, no per-step bound"``."""
+        if self.kind == "idm":
+            return "highway-env IDM"
+        risk = self.variant.replace("_", " ")
+        if self.kind == "rmpc":
+            return f"RMPC ({risk} risk)"
+        parts = [f"SMPC ({risk} risk)", f"{self.severity} severity"]
+        if math.isfinite(self.tolerance):
+            parts.append(f"epsilon {number(self.tolerance)} per step")
+        if self.budget is not None:
+            parts.append(f"episode budget {number(self.budget)}")
+            if not math.isfinite(self.tolerance):
+                parts.append("no per-step bound")
+        return ", ".join(parts)
+
+
+def check_budget(value: float, severity: str, what: str = "budget") -> float:
+    """``value`` as an episode risk budget in ``severity``'s unit: finite, >= 0 and, for the
+    probability severity, at most 1; else ``ValueError`` naming ``what``."""
+    value = float(value)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{what} {value!r} must be finite and >= 0 [the severity's unit per episode]")
+    if severity == "probability" and value > 1.0:
+        raise ValueError(
+            f"{what} {value:g} exceeds 1: with the probability severity a budget is the chance of a"
+            " collision per episode"
+        )
+    return value
+
+
+def resolve(agent: AgentName | str, severity: str, budget: float) -> HighwayAgent:
+    """The agent ``agent`` names (see the module), an SMPC without a severity given ``severity``
+    and, naming neither a tolerance nor a budget, the budget ``budget``. Raises ``ValueError``
+    naming the agent for a bad name or budget."""
+    a = parse_agent(agent, KINDS) if isinstance(agent, str) else agent
+    if a.kind != "smpc":
+        return HighwayAgent(a.kind, a.variant)
+    sev = a.severity or severity
+    tolerance = math.inf if a.tolerance is None else float(a.tolerance)
+    spent = a.budget if a.budget is not None else (float(budget) if a.severity is None else None)
+    if spent is not None:
+        check_budget(spent, sev, f"agent {str(a)!r}: the budget")
+    return HighwayAgent("smpc", a.variant, sev, tolerance, spent)
+
+
+def built_problems() -> frozenset[Any]:
+    """The keys of the MPCs' process-wide cache of built NLPs
+    (:func:`agents.mpc.nlp.solver.cached_problem`)."""
+    from agents.mpc.nlp import solver
+
+    return frozenset(getattr(solver, "_SOLVER_CACHE", {}))
+
+
+class Builder:
+    """Builds the adapter's agents with ``factory`` and keeps the keys of the NLPs their
+    construction built (:attr:`built`), so that a step's own builds can be told apart: an MPC
+    builds each size of its problem when a step first needs it (with a predictor's modes as
+    parameters), inside the step's solve time."""
+
+    def __init__(self, factory: Any) -> None:
+        self.factory = factory
+        self.built: set[Any] = set()
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        before = built_problems()
+        agent = self.factory(*args, **kwargs)
+        self.built |= built_problems() - before
+        return agent
+
+
+def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any:
+    """The driver of ``agent`` for ``env``: the IDM, or the MPC through
+    :class:`risk_env.highway.IntersectionAdapter` with ``predictor`` and the options of ``args``
+    (``uncertainty``, ``slots``, ``max_solve_time``, ``mode_threshold``, ``budget_share``)."""
+    from agents import RMPC, SMPC
+    from risk_env.highway import IDMEgo, IntersectionAdapter
+
+    if agent.kind == "idm":
+        return IDMEgo(env)
+    options: dict[str, Any] = {"risk": agent.variant, "mode_threshold": args.mode_threshold}
+    if args.max_solve_time is not None:
+        options["max_solve_time"] = args.max_solve_time
+    if agent.kind == "smpc":
+        options["risk_tolerance"] = agent.tolerance
+        if agent.budget is not None:
+            options |= {"risk_budget": agent.budget, "budget_share": args.budget_share}
+    return IntersectionAdapter(
+        env,
+        Builder(functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options)),
+        uncertainty=args.uncertainty,
+        severity=agent.severity or args.severity,
+        slots=args.slots,
+        predictor=predictor,
+    )
