@@ -13,6 +13,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from agents.calls import CallRecord
 from risk_env import checks
 from risk_env import observation as ob
 
@@ -93,6 +94,9 @@ class SolveReport:
     capped: bool = False
     """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
     rung's iteration or time limit) or left no time for one."""
+    calls: tuple[CallRecord, ...] = ()
+    """Every solver call of the step, in order: its variant, rung, iteration limit, iterations,
+    wall and CPU time, status (:class:`agents.calls.CallRecord`)."""
     risk_fn: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
     """Computes :attr:`risk` on first access (a diagnostic: the step does not wait for it)."""
     _risk: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)

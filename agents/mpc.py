@@ -30,6 +30,7 @@ import numpy as np
 
 from agents.base import SolveReport, as_batch
 from agents.budget import Budget
+from agents.calls import CallRecord, call_solver
 from agents.objects import check_slots, combine, slot_scenario
 from agents.ocp import STAGE_COSTS, problem_key, slot_numbers, soft_variant
 from agents.solver import (
@@ -39,7 +40,6 @@ from agents.solver import (
     SolverSettings,
     build_problem,
     cached_problem,
-    call_solver,
 )
 from agents.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step
 from risk_env import observation as ob
@@ -324,9 +324,11 @@ class PathFollowingMPC:
         :attr:`ZERO_TOLERANCE_VARIANT`)."""
         raise NotImplementedError
 
-    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
-        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, and
-        the solver iterations that took; None: start from the rollouts."""
+    def _pilot_plan(
+        self, index: int, obs_vec: np.ndarray, variant: str
+    ) -> tuple[np.ndarray, int, tuple[CallRecord, ...]] | None:
+        """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem, the
+        solver iterations that took and its calls; None: start from the rollouts."""
         return None
 
     def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
@@ -417,7 +419,7 @@ class PathFollowingMPC:
     def _call(
         self, pr: Problem, args: dict[str, Any], rung: int = 0
     ) -> tuple[dict[str, np.ndarray], str, bool, int, dict]:
-        """One solver call (:func:`agents.solver.call_solver`); a method so tests can watch it."""
+        """One solver call (:func:`agents.calls.call_solver`); a method so tests can watch it."""
         return call_solver(pr, args, self.settings.solver, rung)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:

@@ -10,6 +10,7 @@ import numpy as np
 
 from agents import risk_budget as rb
 from agents.base import SolveReport
+from agents.calls import CallRecord
 from agents.mpc import PathFollowingMPC
 from agents.objects import slot_rows, symbolic
 from agents.ocp import INACTIVE
@@ -17,6 +18,7 @@ from risk_env.ops import CASADI
 from risk_env.prediction import Belief
 from risk_env.risk import ExactRisk, MonteCarloRisk, RiskEstimator
 from risk_env.scenario import Scenario
+from risk_env.severity import make_severity
 
 CLEARANCE_SOFTNESS = 0.05
 """Temperature [m] of the soft minimum over the Monte Carlo draws' distances (the clearance): below
@@ -103,9 +105,11 @@ class SMPC(PathFollowingMPC):
         risk_weight: float | None = None,
         **kwargs: Any,
     ) -> None:
-        self.risk_budget = rb.check_budget(risk_budget)
+        severity = make_severity(scenario) if isinstance(scenario, Scenario) else None
+        scale, unit = (severity.scale, severity.unit) if severity is not None else (None, "")
+        self.risk_budget = rb.check_budget(risk_budget, scale=scale, unit=unit)
         """B, the episode risk budget [the severity's unit] (None: none); fixed at construction."""
-        self.risk_weight = rb.check_weight(risk_weight)
+        self.risk_weight = rb.check_weight(risk_weight, scale=scale, unit=unit)
         """w, the weight of sum_n R_{n|k} in the objective (None: none); fixed at construction."""
         self._spent: dict[int, float] = {}
         self._budget_backoff = float(kwargs.get("backoff", 1e-3))
@@ -211,7 +215,9 @@ class SMPC(PathFollowingMPC):
             return np.zeros(0)
         if new_episode:
             self._spent[index] = 0.0
-        return rb.terms_parameters(self.risk_budget, self._spent.get(index, 0.0), self.risk_weight)
+        scale = self.estimator.severity.scale
+        spent = self._spent.get(index, 0.0)
+        return rb.terms_parameters(self.risk_budget, spent, self.risk_weight, scale, self._budget_backoff)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
         """One step; with a budget, the applied action's one-step risk R_{1|k} is added to spent."""
@@ -270,7 +276,9 @@ class SMPC(PathFollowingMPC):
             nearest = ca.fmin(nearest, c)
         return ca.fmax(nearest, margin)
 
-    def _pilot_plan(self, index: int, obs_vec: np.ndarray, variant: str) -> tuple[np.ndarray, int] | None:
+    def _pilot_plan(
+        self, index: int, obs_vec: np.ndarray, variant: str
+    ) -> tuple[np.ndarray, int, tuple[CallRecord, ...]] | None:
         """Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
         ``pilot_samples`` draws, itself solved cold from every rollout (its evaluations cost a
         fifth). At epsilon = 0 (``"zero"``) a plan that misses 100 draws may run into the other
@@ -283,7 +291,7 @@ class SMPC(PathFollowingMPC):
         self._pilot.last_solve = report
         if report.fallback is not None:
             return None
-        return np.column_stack([report.inputs, report.path_speed]), report.iterations
+        return np.column_stack([report.inputs, report.path_speed]), report.iterations, report.calls
 
     def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
         if self.risk_method != "monte_carlo":

@@ -132,8 +132,9 @@ class Step:
         warm = not first and mem.get("plan") is not None
         planned = None if warm else agent._pilot_plan(self.index, self.obs_vec, pr.variant)
         if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
-            inputs, iterations = planned
+            inputs, iterations, pilot_calls = planned
             self.tally.iterations += iterations
+            self.tally.calls.extend(pilot_calls)
             w0 = guesses.pack(pr, guesses.rollout(pr, self.x0, inputs), inputs)
             head = [(guesses.fill_accumulators(pr, w0, self.p), None, None)]
             out, calls = self.solve(pr, head, reserve)
@@ -292,4 +293,5 @@ class Step:
             failed_calls=tally.failed_calls,
             overran_calls=tally.overran_calls,
             capped=self.budget.capped,
+            calls=tuple(tally.calls),
         )

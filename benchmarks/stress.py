@@ -2,6 +2,7 @@
 
     python -m benchmarks.stress                          # 200 scenes x rmpc, smpc0, smpc1000
     python -m benchmarks.stress --scenes 20 --agents rmpc --out /tmp/stress
+    python -m benchmarks.stress --family cap --scenes 600 --workers 1 --out docs/results/cap
 
 The scenes (:mod:`benchmarks.scenes`): starts near the path; objects close by, crossing the path,
 or never crossing it; every uncertainty level of Table I and an enlarged growth; v_ref from 1 to
@@ -14,6 +15,11 @@ manoeuvre), as a share of all steps; solver calls that failed; and the step time
 
 Writes ``stress.csv`` (one row per agent and scene), ``stress_summary.csv`` and ``stress.md``
 (the command that made them in its header) to ``--out``.
+
+``--family cap`` (:mod:`benchmarks.cap_family`): each scene with an agent of its own drawn over
+severities, tolerances, episode budgets and risk weights, and every solver call checked against the
+step's cap (iterations past the rung's limit, calls over twice the cap in wall and CPU time);
+writes ``cap.csv``, ``cap_summary.csv`` and ``cap.md``.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import cli
+from benchmarks import cap_family, cli
 from benchmarks.scenes import Scene, infeasible_step, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import default_workers, run_sweep
 
@@ -278,12 +284,20 @@ def markdown(
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.stress`` (defaults shown in ``--help``)."""
     p = cli.parser("stress", __doc__)
+    p.add_argument(
+        "--family",
+        default="scenes",
+        choices=("scenes", "cap"),
+        help="scenes: every agent on every scene; cap: one drawn agent per scene, every call checked",
+    )
     p.add_argument("--scenes", type=int, default=200, help="number of random scenes per agent")
     p.add_argument("--seed", type=int, default=0, help="seed of the scene family")
     p.add_argument(
         "--agents",
-        default=",".join(DEFAULT_AGENTS),
-        help=f"comma list from {', '.join(AGENTS)} (smpc_mc1000: Monte Carlo, slow)",
+        default=None,
+        help=f"comma list from {', '.join(AGENTS)} (smpc_mc1000: Monte Carlo, slow); with --family cap"
+        f" from {', '.join(cap_family.GROUPS)} (default: {','.join(DEFAULT_AGENTS)}; with --family cap"
+        " all its groups)",
     )
     p.add_argument(
         "--max-solve-time",
@@ -305,9 +319,13 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = build_parser()
     args = p.parse_args(argv)
-    args.agents = cli.comma_list(args.agents)
-    if bad := [a for a in args.agents if a not in AGENTS]:
-        p.error(f"unknown agent(s) {bad}; expected from {list(AGENTS)}")
+    known = cap_family.GROUPS if args.family == "cap" else AGENTS
+    default = list(cap_family.GROUPS) if args.family == "cap" else list(DEFAULT_AGENTS)
+    args.agents = default if args.agents is None else cli.comma_list(args.agents)
+    if not args.agents:
+        p.error("--agents is empty")
+    if bad := [a for a in args.agents if a not in known]:
+        p.error(f"unknown agent(s) {bad}; expected from {list(known)}")
     if args.scenes < 1:
         p.error(f"--scenes must be >= 1, got {args.scenes}")
     if args.max_solve_time is not None and not args.max_solve_time > 0:
@@ -326,6 +344,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     if args.solver is not None:
         options["solver"] = args.solver
     scenes = make_scenes(args.scenes, args.seed)
+    if args.family == "cap":
+        return cap_family.run_family(args, scenes, command.strip())
     jobs = [Job(a, s, tuple(sorted(options.items()))) for a in args.agents for s in scenes]
     t0 = time.perf_counter()
     rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="stress episodes")
