@@ -105,20 +105,16 @@ def strict_iterations(on: bool = True) -> Iterator[None]:
         _STRICT.reset(token)
 
 
-BoundPattern = tuple[bytes, bytes]
-"""Which entries of (lbx, lbg) are equalities and which are inequalities, as packed bits."""
+BoundPattern = bytes
+"""Which entries of (lbx, lbg) are equalities and which have no bound, as bytes of two masks."""
 
 
 def bound_pattern(lbx: Any, ubx: Any, lbg: Any, ubg: Any) -> BoundPattern:
-    """The split CasADi's fatrop plugin makes of these bounds: equalities (lb = ub) and inequalities
-    (the rest, unless both bounds are infinite)."""
-    out = []
-    for lo, hi in ((lbx, ubx), (lbg, ubg)):
-        lo, hi = np.asarray(lo, float).ravel(), np.asarray(hi, float).ravel()
-        equal = lo == hi
-        bounded = ~equal & ~(np.isneginf(lo) & np.isposinf(hi))
-        out.append(np.packbits(np.concatenate([equal, bounded])).tobytes())
-    return out[0], out[1]
+    """The split CasADi's fatrop plugin makes of these bounds: equalities (lb = ub), entries
+    without a bound (both infinite), inequalities (the rest)."""
+    lo = np.concatenate((np.ravel(lbx), np.ravel(lbg)))
+    hi = np.concatenate((np.ravel(ubx), np.ravel(ubg)))
+    return (lo == hi).tobytes() + ((lo == -np.inf) & (hi == np.inf)).tobytes()
 
 
 class Solvable(Protocol):

@@ -22,17 +22,17 @@ default), so rounding of float32 observations and the solver's constraint tolera
 the row's units, the scale) cannot carry the episode over B. B', spent_k, nu, a switch-off and the
 weight are solver parameters (:data:`agents.ocp.TERMS`): one built solver serves every budget.
 
-*Why nu = 1/scale, not 1/B.* fatrop (1.1.8) regularises a KKT system whose reduced Hessian fails
-its relative pivot test by adding delta_w to the diagonal, the inequalities' slacks included, and
-multiplying delta_w by 8 to 100 until the test passes, with no upper limit (IPOPT stops at 1e40).
-An inequality row or a dynamics row with gradient a adds delta_w a a' to the regularised matrix, so
-for every delta_w its relative pivots are those of ``I + a a'``: at |a| of a few thousand they stay
-below fatrop's tolerance (1e-8), delta_w overflows to inf, the matrix turns to NaN, and the call
-never returns, whatever ``max_iter``. With nu = 1/B and B = 0.01 J under the paper's severity
-(scale 1000 J) the budget row's and the accumulator's gradients are 1e5 times the risk rows'
-(``RiskCrossing-v0`` medium, seed 20011: the first call never returned); with nu = 1/scale they
-are the risk rows' own. Budgets below ``MIN_BUDGET`` scales (below the solver's resolution) or above
-``MAX_BUDGET`` scales (whose row values lose the resolution) are rejected.
+*Why nu = 1/scale, not 1/B.* Within one iteration fatrop (1.1.8) raises its primal
+regularisation delta_w, without limit, until every pivot of its Riccati factorisation passes a
+relative test, and the inequalities' slacks are regularised too: a row (or a dynamics row) with
+gradient a adds delta_w a a', so for every delta_w the pivots are those of ``I + a a'``, about
+1/|a|^2 relative, and once |a| is about a thousand they fail at any delta_w; delta_w overflows, the
+matrix turns to NaN, and the call never returns, whatever ``max_iter`` (:mod:`agents.calls`). With
+nu = 1/B and B = 0.01 J under the paper's severity (scale 1000 J) the budget row's gradient was 1.5e4
+(``RiskCrossing-v0`` medium, seed 20011: the first call never returned); with nu = 1/scale the
+budget row's and the accumulator's gradients are the risk rows', about 1. Budgets below
+:data:`MIN_BUDGET` scales (the spare would eat most of them) or above :data:`MAX_BUDGET` scales
+(whose row values lose the resolution) and weights above :data:`MAX_WEIGHT` per scale are rejected.
 
 *Why it holds.* If every step's hard problem is solved, spent_{k+1} = spent_k + R_{1|k} <= B -
 sum_{n>=2} R_{n|k} <= B, so the episode's summed risk stays within B. A step whose plan misses the
@@ -78,9 +78,10 @@ MIN_BUDGET = 1e-5
 MAX_BUDGET = 1e6
 """The largest budget [the severity's scale]: the row's values keep a resolution of 1e-10 scales."""
 MAX_WEIGHT = 1e6
-"""The largest risk weight times the severity's scale [cost]: a heavier weight makes the objective's
-Hessian so large against the path cost's that fatrop's search direction degenerates (at 1e300 it
-is infinite, and the call never returns)."""
+"""The largest risk weight times the severity's scale [cost]. Heavier weights buy nothing but
+harder problems (with the probability severity at medium uncertainty, seed 1: from 1e4 on, calls
+run to their iteration limit and fallbacks act), and near 1e200 per scale the objective's Hessian
+overflows: fatrop's inertia correction then never ends (:mod:`agents.calls`)."""
 
 
 def check_budget(

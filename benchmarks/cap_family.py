@@ -155,8 +155,9 @@ def make_settings(groups: list[str], count: int, seed: int, scenes: list[Scene])
     return out
 
 
-def run_setting(setting: Setting, max_solve_time: float | None = None) -> dict[str, Any]:
-    """One episode of the setting's agent: its row, with every call's and step's times."""
+def run_setting(setting: Setting, extra: tuple[tuple[str, Any], ...] = ()) -> dict[str, Any]:
+    """One episode of the setting's agent (with the ``extra`` options, e.g. ``max_solve_time``): its
+    row, with every call's and step's times."""
     import gymnasium as gym
 
     import risk_env  # noqa: F401  (registers the env)
@@ -164,14 +165,11 @@ def run_setting(setting: Setting, max_solve_time: float | None = None) -> dict[s
 
     method, risk = GROUPS[setting.group]
     scene = setting.scene
-    scenario = scene.scenario(0.0).replace(severity=setting.severity, max_steps=MAX_STEPS)
+    options = {**setting.options(), **dict(extra)}
+    # the RMPC takes its epsilon from the scenario; the SMPC as an option (math.inf: none)
+    epsilon = options.pop("risk_tolerance") if method == "RMPC" else 0.0
+    scenario = scene.scenario(epsilon).replace(severity=setting.severity, max_steps=MAX_STEPS)
     env = gym.make("RiskCrossing-v0", scenario=scenario, object_motion=scene.motion)
-    options = setting.options()
-    if method == "RMPC":
-        scenario = scenario.replace(risk_tolerance=options.pop("risk_tolerance"))
-        env = gym.make("RiskCrossing-v0", scenario=scenario, object_motion=scene.motion)
-    if max_solve_time is not None:
-        options["max_solve_time"] = max_solve_time
     row: dict[str, Any] = {
         "group": setting.group,
         "index": scene.index,
@@ -254,7 +252,12 @@ def summarise(group: str, rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def markdown(
-    summary: list[dict[str, Any]], rows: list[dict[str, Any]], command: str, wall: float, where: str
+    summary: list[dict[str, Any]],
+    rows: list[dict[str, Any]],
+    command: str,
+    wall: float,
+    where: str,
+    cap: float | None = None,
 ) -> str:
     """The family's report: the command, the summary table, the settings that did not run."""
     lines = [
@@ -265,8 +268,9 @@ def markdown(
         f"Machine: {where}, shared with whatever else ran (wall times depend on it; CPU times less).",
         "",
         "Settings: stress scenes with agents drawn over severities, tolerances, episode budgets and risk",
-        f"weights (`benchmarks/cap_family.py`), episodes of at most {MAX_STEPS} steps, the default cap",
-        "(100 ms). Overran: calls past their rung's iteration limit. > 2 cap: calls longer than twice",
+        f"weights (`benchmarks/cap_family.py`), episodes of at most {MAX_STEPS} steps, a cap of",
+        ("the agents' default (100 ms)" if cap is None else f"{1e3 * cap:g} ms")
+        + ". Overran: calls past their rung's iteration limit. > 2 cap: calls longer than twice",
         "the cap, by wall time and by the process's CPU time. Call and step times in ms. Rejected:",
         "agents refused with a named error (a budget or weight out of range); errors: episodes that",
         "raised.",
@@ -306,7 +310,8 @@ def run_family(args: argparse.Namespace, scenes: list[Scene], command: str) -> l
     """``python -m benchmarks.stress --family cap``: one drawn agent per scene; writes ``cap.csv``,
     ``cap_summary.csv`` and ``cap.md`` to ``args.out``."""
     settings = make_settings(args.agents, args.scenes, args.seed, scenes)
-    run = functools.partial(run_setting, max_solve_time=args.max_solve_time)
+    extra = {"max_solve_time": args.max_solve_time, "solver": args.solver}
+    run = functools.partial(run_setting, extra=tuple((k, v) for k, v in extra.items() if v is not None))
     t0 = time.perf_counter()
     rows = run_sweep(run, settings, args.workers, args.ray, desc="cap settings")
     wall = time.perf_counter() - t0
@@ -324,7 +329,7 @@ def run_family(args: argparse.Namespace, scenes: list[Scene], command: str) -> l
     where = f"{os.cpu_count()} cores, " + (
         "a Ray cluster" if args.ray is not False else f"{workers} worker(s)"
     )
-    text = markdown(summary, rows, command, wall, where)
+    text = markdown(summary, rows, command, wall, where, args.max_solve_time)
     (args.out / "cap.md").write_text(text)
     print(text)
     return summary
