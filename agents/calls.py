@@ -8,9 +8,10 @@ call bounded.
   bounds into equalities (lb = ub) and inequalities (not both infinite); when a stage's counts
   differ from the cached solver's, the plugin destroys it and creates another *without* setting
   the options (``new_solver`` is computed before the re-split), so every later call runs with
-  fatrop's defaults (``max_iter`` 1000, ``tol`` 1e-8, ``mu_init`` 0.1). The bounds of every call
-  of a problem must therefore have the pattern of its build (:func:`bound_pattern`); a call with
-  another raises :class:`BoundPatternError` before it runs.
+  fatrop's defaults (``max_iter`` 1000, ``tol`` 1e-8, ``mu_init`` 0.1) (CasADi's
+  ``FatropInterface::solve`` and ``casadi_fatrop_presolve``, since its commit 34a831e "feat solver
+  cache"). The bounds of every call of a problem must therefore have the pattern of its build
+  (:func:`bound_pattern`); a call with another raises :class:`BoundPatternError` before it runs.
 - *An unbounded inertia correction.* Inside one iteration fatrop multiplies its primal
   regularisation delta_w by 8 to 100 until every pivot of its Riccati factorisation passes a
   relative test (pivot^2 > 1e-6 times the diagonal entry), with no upper limit (IPOPT stops at
@@ -21,11 +22,12 @@ call bounded.
   Traced (gdb on ``blasfeo_dpotrf_l_mn``) on the first call of ``SMPC.from_env(RiskCrossing-v0
   medium, risk_budget=0.01)`` at seed 20011: the episode budget's row had gradients of 1.5e4 (its
   normaliser 1/B = 100 on a risk in J); the stage's pivots failed at delta_w = 0, 1e-4, 1e-2, ...,
-  1e117 (60 tries, diagonal growing as delta_w times 4e7) and later on NaN; the call ran for more
-  than 300 s. The NLP keeps every row's gradient in the risk rows' scale (the budget's terms in
-  units of the severity's scale, :mod:`agents.risk_budget`) and rejects the budgets and weights
-  that would scale it up; :attr:`CallRecord.overran` and the strict mode
-  (:func:`strict_iterations`) catch any call that still runs past its rung's limit.
+  1e117 (60 tries, diagonal growing as delta_w times 4e7) and later on NaN; the call never
+  returned (killed after 120 s here, after 300 s in issue 21). The NLP keeps every row's gradient
+  in the risk rows' scale (the budget's terms in units of the severity's scale,
+  :mod:`agents.risk_budget`) and rejects the budgets and weights that would scale it up;
+  :attr:`CallRecord.overran` and the strict mode (:func:`strict_iterations`) catch any call that
+  still runs past its rung's limit.
 
 **Strict mode**: a call of more iterations than its rung allows raises
 :class:`IterationLimitError` (the tests run strict: ``tests/conftest.py`` sets

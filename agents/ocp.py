@@ -104,8 +104,9 @@ Margin = Callable[[ca.SX, list[Belief], ca.SX, ca.SX, ca.SX, bool], ca.SX]
 """``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
 collision distance [m], mass [kg], zero) -> rows``: every row >= 0 iff the step's risk bound holds."""
 TERMS = 5
-"""Parameters of the risk terms (:mod:`agents.risk_budget`), at the end of p: the budget B, the risk
-spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
+"""Parameters of the risk terms (:mod:`agents.risk_budget`), at the end of p: the budget B' (B shifted
+by its spare), the risk spent so far, the normaliser nu = 1/scale of the budget row and accumulator,
+the row's switch-off (1: the row always holds) and the weight w."""
 RiskValue = Callable[[ca.SX, list[Belief], ca.SX, ca.SX], ca.SX]
 """``(ego (4,), beliefs (one per slot), risk data (K J, 3), slot numbers (K, 3)) -> R``: the agent's
 per-stage risk summed over the active slots (the budget's and the cost's)."""
@@ -286,7 +287,7 @@ def assemble(
             row = row + S[n]
             cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near_weight(X[n], stacked[n]) * S[n]
         add_g(row, 0.0, math.inf, n, "risk")
-        if C and n == N:  # (B - spent - R_N) * normaliser - c_N + switch-off >= backoff
+        if C and n == N:  # (B' - spent - R_N) * normaliser - c_N + switch-off >= backoff
             left = (p_terms[0] - p_terms[1] - values[N]) * p_terms[2] - C[N] + p_terms[3]
             add_g(left + s_budget if soft else left, 0.0, math.inf, N, "budget")
             cost += soft_penalty * s_budget if soft else 0.0
