@@ -37,6 +37,33 @@ class Policy(Protocol):
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]: ...
 
 
+@dataclass(frozen=True)
+class CallRecord:
+    """What one solver call did."""
+
+    variant: str
+    """The NLP variant called (``"general"``, ``"zero_soft"``, ...)."""
+    rung: int
+    """Its rung (0: the largest)."""
+    limit: int
+    """The rung's ``max_iter``."""
+    iterations: int
+    """Iterations the solver reported."""
+    wall_time: float
+    """Wall time of the call [s]."""
+    cpu_time: float
+    """CPU time of the process during the call [s]."""
+    status: str
+    """The solver's return status."""
+    success: bool
+    """The call converged."""
+
+    @property
+    def overran(self) -> bool:
+        """More iterations than the rung allows (fatrop counts one beyond its ``max_iter``)."""
+        return self.iterations > self.limit + 1
+
+
 @dataclass
 class SolveReport:
     """What one MPC step did. Arrays use the prediction index n = 0..N (states) or n = 0..N-1
@@ -93,6 +120,9 @@ class SolveReport:
     capped: bool = False
     """The step's time cap (``max_solve_time``) cut a solver call short (it failed at a smaller
     rung's iteration or time limit) or left no time for one."""
+    calls: tuple[CallRecord, ...] = ()
+    """Every solver call of the step, in order: its variant, rung, iteration limit, iterations,
+    wall and CPU time, status (:class:`CallRecord`)."""
     risk_fn: Callable[[], np.ndarray] | None = field(default=None, repr=False, compare=False)
     """Computes :attr:`risk` on first access (a diagnostic: the step does not wait for it)."""
     _risk: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)

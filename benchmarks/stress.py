@@ -2,6 +2,7 @@
 
     python -m benchmarks.stress            # 200 scenes x rmpc, smpc:paper:0, smpc:paper:1000
     python -m benchmarks.stress --scenes 20 --agents rmpc --out results/stress20
+    python -m benchmarks.stress --family cap --scenes 600 --workers 1 --out docs/results/cap
 
 The scenes (:mod:`benchmarks.scenes`): starts near the path; objects close by, crossing the path,
 or never crossing it; every uncertainty level of Table I and an enlarged growth; v_ref from 1 to
@@ -16,6 +17,11 @@ Agents are named as in every command (:mod:`benchmarks.agent_names`); an SMPC wi
 runs at epsilon = 0 in the paper's severity (J). Writes ``stress.csv`` (one row per agent and
 scene), ``stress_summary.csv`` and ``stress.md`` (the command that made them in its header) to
 ``--out``, as one output set (:mod:`benchmarks.output`; ``--resume`` goes on after an interruption).
+
+``--family cap`` (:mod:`benchmarks.cap_family`): each scene with an agent of its own drawn over
+severities, tolerances, episode budgets and risk weights, and every solver call checked against the
+step's cap (iterations past the rung's limit, calls over twice the cap in wall and CPU time);
+``--agents`` then names its groups; writes ``cap.csv``, ``cap_summary.csv`` and ``cap.md``.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks import cli
+from benchmarks import cap_family, cli
 from benchmarks.agent_names import AgentName, parse_agent
 from benchmarks.scenes import Scene, infeasible_step, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import default_workers, run_sweep
@@ -286,14 +292,20 @@ def markdown(
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.stress`` (defaults shown in ``--help``)."""
     p = cli.parser("stress", __doc__)
+    p.add_argument(
+        "--family",
+        default="scenes",
+        choices=("scenes", "cap"),
+        help="scenes: every agent on every scene; cap: one drawn agent per scene, every call checked",
+    )
     p.add_argument("--scenes", type=cli.positive_int, default=200, help="number of random scenes per agent")
     p.add_argument("--seed", type=cli.nonnegative_int, default=0, help="seed of the scene family")
     p.add_argument(
         "--agents",
-        type=cli.agents_list(("rmpc", "smpc")),
-        default=",".join(DEFAULT_AGENTS),
+        default=None,
         help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]"
-        " (smpc:monte_carlo: slow)",
+        f" (smpc:monte_carlo: slow; default {','.join(DEFAULT_AGENTS)}); with --family cap, groups"
+        f" from {','.join(cap_family.GROUPS)} (default: all)",
     )
     p.add_argument(
         "--max-solve-time",
@@ -312,20 +324,34 @@ def build_parser() -> argparse.ArgumentParser:
 def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None = None) -> argparse.Namespace:
     p = p or build_parser()
     args = p.parse_args(argv)
-    args.agents = [str(agent(str(a))) for a in args.agents]
+    if args.family == "cap":
+        args.agents = list(cap_family.GROUPS) if args.agents is None else cli.comma_list(args.agents)
+        if not args.agents:
+            p.error("argument --agents: the list is empty")
+        if bad := [a for a in args.agents if a not in cap_family.GROUPS]:
+            p.error(f"argument --agents: unknown group(s) {bad}; expected from {list(cap_family.GROUPS)}")
+        return args
+    try:
+        names = cli.agents_list(("rmpc", "smpc"))(args.agents or ",".join(DEFAULT_AGENTS))
+    except argparse.ArgumentTypeError as error:
+        p.error(f"argument --agents: {error}")
+    args.agents = [str(agent(str(a))) for a in names]
     return args
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     p = build_parser()
     args = parse_args(argv, p)
-    out = cli.open_output(p, args, "stress", FILES, argv)
+    cap = args.family == "cap"
+    out = cli.open_output(p, args, "cap" if cap else "stress", cap_family.FILES if cap else FILES, argv)
     options: dict[str, Any] = {}
     if args.max_solve_time is not None:
         options["max_solve_time"] = args.max_solve_time
     if args.solver is not None:
         options["solver"] = args.solver
     scenes = make_scenes(args.scenes, args.seed)
+    if cap:
+        return cap_family.run_family(args, scenes, out)
     jobs = [Job(a, s, tuple(sorted(options.items()))) for a in args.agents for s in scenes]
     with out:
         t0 = time.perf_counter()

@@ -47,7 +47,13 @@ def test_effective_tolerance_and_parameters() -> None:
     assert rb.effective_tolerance(math.inf, 0.05, 1e-3, 1.0) == pytest.approx(0.051)
     assert rb.effective_tolerance(0.01, 0.05, 1e-3, 1.0) == 0.01
     assert rb.effective_tolerance(math.inf, 0.0, 1e-3, 1.0) == 0.0
-    np.testing.assert_allclose(rb.terms_parameters(0.05, 0.01, 2.0), [0.05, 0.01, 20.0, 0.0, 2.0])
+    # the row (B' - spent - R_N) nu - c_N + off >= backoff, c_N = nu sum_{n<N} R_n, holds iff
+    # spent + sum_n R_n <= B - backoff B - RESOLUTION scale, with nu = 1/scale whatever B
+    for budget, scale in ((0.05, 1.0), (0.01, 1000.0), (3e4, 1000.0), (2e-7, 0.01)):
+        shifted, spent, nu, off, weight = rb.terms_parameters(budget, 0.2 * budget, 2.0, scale, 1e-3)
+        assert (spent, nu, off, weight) == (0.2 * budget, 1.0 / scale, 0.0, 2.0)
+        edge = budget - 1e-3 * budget - rb.RESOLUTION * scale  # spent + sum_n R_n at the row's bound
+        assert (shifted - edge) * nu == pytest.approx(1e-3, rel=1e-9)
     np.testing.assert_allclose(rb.terms_parameters(0.0, 0.0, None), [0.0, 0.0, 0.0, 1.0, 0.0])
 
 

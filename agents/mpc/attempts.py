@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.base import CallRecord
 from agents.mpc import guesses
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.solver import Problem
@@ -41,6 +42,8 @@ class Tally:
     """Return status of the last call."""
     timings: dict[str, float] = field(default_factory=dict)
     """Solver-internal wall times [s] of the last call."""
+    calls: list[CallRecord] = field(default_factory=list)
+    """Every call, in order (a pilot problem's first)."""
 
 
 def solve(
@@ -77,9 +80,21 @@ def solve(
         arguments = {**args, "x0": w0}
         if lam_x is not None:
             arguments.update(lam_x0=lam_x, lam_g0=lam_g)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         out, status, ok, iterations, timings = call(problem, arguments, rung)
         elapsed = time.perf_counter() - t0
+        limit = problem.limits[rung][0]
+        record = CallRecord(
+            getattr(problem, "variant", ""),
+            rung,
+            limit,
+            iterations,
+            elapsed,
+            time.process_time() - c0,
+            status,
+            ok,
+        )
+        tally.calls.append(record)
         problem.times.record(iterations, elapsed)
         calls += 1
         tally.iterations += iterations
@@ -90,9 +105,9 @@ def solve(
         elif best is None:
             tally.status, tally.timings = status, timings
         tally.failed_calls += not ok
-        tally.overran_calls += iterations > problem.limits[rung][0] + 1  # fatrop counts one more
+        tally.overran_calls += record.overran
         # the budget cut this call short: it stopped at a smaller rung's iteration or time limit
-        stopped = iterations >= problem.limits[rung][0] or status in TIME_LIMITED
+        stopped = iterations >= limit or status in TIME_LIMITED
         budget.capped |= not ok and rung > 0 and stopped
         if ok and (not keep_best or (enough is not None and enough(out))):
             break

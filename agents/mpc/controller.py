@@ -18,6 +18,7 @@ from agents.mpc import measure
 from agents.mpc.hooks import RiskForm
 from agents.mpc.measure import FREE_MARGIN
 from agents.mpc.nlp.budget import Budget
+from agents.mpc.nlp.calls import call_solver
 from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, soft_variant
 from agents.mpc.nlp.parameters import parameter_vector
 from agents.mpc.nlp.solver import (
@@ -27,7 +28,6 @@ from agents.mpc.nlp.solver import (
     SolverSettings,
     build_problem,
     cached_problem,
-    call_solver,
 )
 from agents.mpc.objects import MODE_THRESHOLD, Slots, check_slots, check_threshold, combine
 from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step, StepContext, StepInput
@@ -319,7 +319,7 @@ class PathFollowingMPC(RiskForm):
     def _call(
         self, pr: Problem, args: dict[str, Any], rung: int = 0
     ) -> tuple[dict[str, np.ndarray], str, bool, int, dict]:
-        """One solver call (:func:`agents.mpc.nlp.solver.call_solver`); a method so tests can watch it."""
+        """One solver call (:func:`agents.mpc.nlp.calls.call_solver`); a method so tests can watch it."""
         return call_solver(pr, args, self.settings.solver, rung)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:

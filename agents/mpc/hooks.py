@@ -9,6 +9,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from agents.base import CallRecord
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import RiskEstimator
 from risk_env.scenario.scenario import Scenario
@@ -39,9 +40,10 @@ class RiskForm:
 
     def _pilot_plan(
         self, index: int, obs_vec: np.ndarray, variant: str, epsilon: float = 0.0
-    ) -> tuple[np.ndarray, int] | None:
+    ) -> tuple[np.ndarray, int, tuple[CallRecord, ...]] | None:
         """A cold start's first initial guess: inputs ``(N, NU)`` planned on a cheaper problem at
-        the step's ``epsilon``, and the solver iterations that took; None: start from the rollouts."""
+        the step's ``epsilon``, the solver iterations that took and its calls; None: start from the
+        rollouts."""
         return None
 
     def _step_epsilon(self, index: int, new_episode: bool) -> float:

@@ -8,7 +8,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from agents.base import SolveReport
+from agents.base import CallRecord, SolveReport
 from agents.mpc.controller import PathFollowingMPC
 from agents.mpc.nlp import risk_budget as rb
 from agents.mpc.nlp.parameters import INACTIVE, NUMBER_COLUMNS
@@ -17,6 +17,7 @@ from risk_env import checks
 from risk_env.models.ops import CASADI
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import ExactRisk, MonteCarloRisk, RiskEstimator
+from risk_env.risk.severity import make_severity
 from risk_env.scenario.scenario import Scenario
 
 CLEARANCE_SOFTNESS = 0.05
@@ -111,13 +112,15 @@ class SMPC(PathFollowingMPC):
         budget_share: float = rb.BUDGET_SHARE,
         **kwargs: Any,
     ) -> None:
-        self.risk_budget = rb.check_budget(risk_budget)
+        severity = make_severity(scenario) if isinstance(scenario, Scenario) else None
+        scale, unit = (severity.scale, severity.unit) if severity is not None else (None, "")
+        self.risk_budget = rb.check_budget(risk_budget, scale=scale, unit=unit)
         """B, the episode risk budget [the severity's unit] (None: none); fixed at construction."""
         self.budget_allocation = rb.check_allocation(budget_allocation)
         """How the budget is spent (:data:`agents.mpc.nlp.risk_budget.ALLOCATIONS`)."""
         self.budget_share = rb.check_share(budget_share)
         """alpha, the share of what is left of the budget a step may spend (``"share"``)."""
-        self.risk_weight = rb.check_weight(risk_weight)
+        self.risk_weight = rb.check_weight(risk_weight, scale=scale, unit=unit)
         """w, the weight of sum_n R_{n|k} in the objective (None: none); fixed at construction."""
         self._spent: dict[int, float] = {}
         self._budget_backoff = checks.positive("backoff", kwargs.get("backoff", 1e-3), strict=False)
@@ -239,7 +242,9 @@ class SMPC(PathFollowingMPC):
             return np.zeros(0)
         if new_episode:
             self._spent[index] = 0.0
-        return rb.terms_parameters(self.risk_budget, self._spent.get(index, 0.0), self.risk_weight)
+        scale = self.estimator.severity.scale
+        spent = self._spent.get(index, 0.0)
+        return rb.terms_parameters(self.risk_budget, spent, self.risk_weight, scale, self._budget_backoff)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
         """One step; with a budget, the applied action's one-step risk R_{1|k} is added to spent."""
@@ -300,7 +305,7 @@ class SMPC(PathFollowingMPC):
 
     def _pilot_plan(
         self, index: int, obs_vec: np.ndarray, variant: str, epsilon: float = 0.0
-    ) -> tuple[np.ndarray, int] | None:
+    ) -> tuple[np.ndarray, int, tuple[CallRecord, ...]] | None:
         """Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
         ``pilot_samples`` draws, itself solved cold from every rollout (its evaluations cost a
         fifth). At epsilon = 0 (``"zero"``) a plan that misses 100 draws may run into the other
@@ -313,7 +318,7 @@ class SMPC(PathFollowingMPC):
         self._pilot.last_solve = report
         if report.fallback is not None:
             return None
-        return np.column_stack([report.inputs, report.path_speed]), report.iterations
+        return np.column_stack([report.inputs, report.path_speed]), report.iterations, report.calls
 
     def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
         if self.risk_method != "monte_carlo":

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import SolveReport
+from agents.base import CallRecord, SolveReport
 from agents.mpc import attempts, fallback, guesses
 from agents.mpc.attempts import Call, Guess, Tally
 from agents.mpc.fallback import feasible_action
@@ -74,8 +74,8 @@ Outputs = dict[str, np.ndarray]
 RiskFunction = Callable[[np.ndarray, list[Belief | None], np.ndarray], np.ndarray]
 """``(ego states (N, 4), each slot's beliefs at n = 1..N or None, risk data) -> risk (N,)``: the
 agent's own numpy risk, summed over the present slots."""
-Pilot = Callable[[int, np.ndarray, str], tuple[np.ndarray, int] | None]
-"""``(batch index, observation, variant) -> (inputs (N, NU), iterations) or None``: a cold start's
+Pilot = Callable[[int, np.ndarray, str], tuple[np.ndarray, int, tuple[CallRecord, ...]] | None]
+"""``(batch index, observation, variant) -> (inputs (N, NU), iterations, calls) or None``: a cold start's
 first initial guess, planned on a cheaper problem (the Monte Carlo SMPC's pilot)."""
 
 
@@ -215,8 +215,9 @@ class Step:
         pilot = None if warm or ctx.pilot is None else ctx.pilot
         planned = None if pilot is None else pilot(self.index, self.obs_vec, pr.variant)
         if planned is not None:  # the pilot's plan first; its own cold start chose among the rollouts
-            inputs, iterations = planned
+            inputs, iterations, pilot_calls = planned
             self.tally.iterations += iterations
+            self.tally.calls.extend(pilot_calls)
             w0 = guesses.pack(pr, guesses.rollout(pr, self.x0, inputs), inputs)
             head = [(guesses.fill_accumulators(pr, w0, self.p), None, None)]
             out, calls = self.solve(pr, head, reserve)
@@ -371,5 +372,6 @@ class Step:
             failed_calls=tally.failed_calls,
             overran_calls=tally.overran_calls,
             capped=self.budget.capped,
+            calls=tuple(tally.calls),
         )
         return StepResult(report, mem, self.manoeuvre_time, kind is not None)

@@ -3,11 +3,12 @@ of the solver rung (:meth:`agents.mpc.nlp.solver.SolverSettings.rung_limits`) th
 
 IPOPT stops itself at its ``max_wall_time``; fatrop (CasADi 3.8) has no time limit, only
 ``max_iter``, so its calls are predicted from the measured time per iteration of the same NLP.
-That ``max_iter`` does not bound every call: fatrop 1.1.8 sometimes runs on past it. In the stress
-benchmark such calls ran 31 and 1,001 iterations at a limit of 4, their iteration logs starting at
-fatrop's default barrier parameter 0.1 rather than the ``mu_init`` set, the longer one ending at
-fatrop's default limit of 1,000; ``iteration_callback`` is ignored by the plugin, so nothing can stop
-such a call. :attr:`agents.SolveReport.overran_calls` counts them; ``benchmarks.stress`` reports them.
+``max_iter`` bounds a call only while fatrop keeps its options and each iteration ends; both failed
+before (calls of 31 and 1,001 iterations at a limit of 4 that had lost their options; calls that
+never returned from one iteration's inertia correction), and :mod:`agents.mpc.nlp.calls` says why and
+what keeps them bounded. Every call is recorded (:attr:`agents.SolveReport.calls`); one past its
+rung's limit is counted (:attr:`agents.SolveReport.overran_calls`, reported by
+``benchmarks.stress``) or, in strict mode, raised.
 """
 
 from __future__ import annotations

@@ -303,8 +303,8 @@ def assemble(
             row = row + S[n]
             cost += soft_penalty * EARLY_WEIGHT ** (N - n) * near_weight(X[n], stacked[n]) * S[n]
         add_g(row, 0.0, math.inf, n, "risk")
-        if C and n == N:  # (B - spent - sum_n R_n) * normaliser + switch-off >= backoff
-            left = (p_terms[0] - p_terms[1] - C[N] - values[N]) * p_terms[2] + p_terms[3]
+        if C and n == N:  # (B' - spent - R_N) * normaliser - c_N + switch-off >= backoff
+            left = (p_terms[0] - p_terms[1] - values[N]) * p_terms[2] - C[N] + p_terms[3]
             add_g(left + s_budget if soft else left, 0.0, math.inf, N, "budget")
             cost += soft_penalty * s_budget if soft else 0.0
         return cost
@@ -320,9 +320,9 @@ def assemble(
             w_tags.append((N, "s", 1))
 
     def add_accumulator(n: int) -> None:
-        """c_{n+1} = c_n + R_n (c_1 = 0), the gap row's last component: stage-local."""
+        """c_{n+1} = c_n + normaliser * R_n (c_1 = 0), the gap row's last component: stage-local."""
         if C and n < N:
-            add_g(C[n + 1] - (C[n] + values[n] if n >= 1 else 0.0), 0.0, 0.0, n, "accumulate")
+            add_g(C[n + 1] - (C[n] + p_terms[2] * values[n] if n >= 1 else 0.0), 0.0, 0.0, n, "accumulate")
 
     # --- objective, dynamics, rate limits and risk, stage-wise
     cost = 0.0

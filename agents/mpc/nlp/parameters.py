@@ -22,8 +22,9 @@ object mass [kg]; with given beliefs a fourth, the mode's weight w."""
 INACTIVE = 1e3
 """Margin units added to an inactive slot's rows (so they hold, whatever the slot's numbers)."""
 TERMS = 5
-"""Parameters of the risk terms (:mod:`agents.mpc.nlp.risk_budget`), at the end of p: the budget B, the risk
-spent so far, the budget row's normaliser, its switch-off (1: the row always holds) and the weight w."""
+"""Parameters of the risk terms (:mod:`agents.mpc.nlp.risk_budget`), at the end of p: the budget B'
+(B shifted by its spare), the risk spent so far, the normaliser nu = 1/scale of the budget row and
+accumulator, the row's switch-off (1: the row always holds) and the weight w."""
 
 _UNCERTAINTY_FIELDS = (
     ("sigma0", 3),

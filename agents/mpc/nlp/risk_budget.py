@@ -26,13 +26,25 @@ with the episode (a new episode is detected as the warm start is: ``episode_star
 observation that does not continue the last one).
 
 The sum across stages is carried stage-locally, the way the state carries the previous input: an
-accumulator c_n = R_1 + ... + R_{n-1} (c_1 = 0, c_{n+1} = c_n + R_n, a row of stage n) and at stage
-N the row ``(B - spent_k - c_N - R_N) / B >= backoff`` (relative to B: the plan keeps ``backoff``,
-1e-3 by default, of the budget spare, so rounding of float32 observations and the solver's
-constraint tolerance of 1e-6 cannot carry the episode over B). B, spent_k, the normaliser 1/B, a
-switch-off and the weight are solver parameters (:data:`agents.mpc.nlp.parameters.TERMS`): one built
-solver serves
-every budget.
+accumulator c_n = nu (R_1 + ... + R_{n-1}) (c_1 = 0, c_{n+1} = c_n + nu R_n, a row of stage n) and at
+stage N the row ``(B' - spent_k - R_N) nu - c_N >= backoff``, with nu = 1/scale (the severity's
+typical magnitude) and B' chosen so that the row holds iff ``spent_k + sum_n R_n <= B - spare``:
+the plan keeps ``spare = backoff B + RESOLUTION scale`` of the budget unspent (``backoff``, 1e-3 by
+default), so rounding of float32 observations and the solver's constraint tolerance of 1e-6 (in
+the row's units, the scale) cannot carry the episode over B. B', spent_k, nu, a switch-off and the
+weight are solver parameters (:data:`agents.mpc.nlp.parameters.TERMS`): one built solver serves every budget.
+
+*Why nu = 1/scale, not 1/B.* Within one iteration fatrop (1.1.8) raises its primal
+regularisation delta_w, without limit, until every pivot of its Riccati factorisation passes a
+relative test, and the inequalities' slacks are regularised too: a row (or a dynamics row) with
+gradient a adds delta_w a a', so for every delta_w the pivots are those of ``I + a a'``, about
+1/|a|^2 relative, and once |a| is about a thousand they fail at any delta_w; delta_w overflows, the
+matrix turns to NaN, and the call never returns, whatever ``max_iter`` (:mod:`agents.mpc.nlp.calls`). With
+nu = 1/B and B = 0.01 J under the paper's severity (scale 1000 J) the budget row's gradient was 1.5e4
+(``RiskCrossing-v0`` medium, seed 20011: the first call never returned); with nu = 1/scale the
+budget row's and the accumulator's gradients are the risk rows', about 1. Budgets below
+:data:`MIN_BUDGET` scales (the spare would eat most of them) or above :data:`MAX_BUDGET` scales
+(whose row values lose the resolution) and weights above :data:`MAX_WEIGHT` per scale are rejected.
 
 *Why it holds.* If every step's hard problem is solved, spent_{k+1} = spent_k + R_{1|k} <= B -
 sum_{n>=2} R_{n|k} <= B, so the episode's summed risk stays within B. A step whose plan misses the
@@ -98,19 +110,52 @@ def share_tolerance(epsilon: float, budget: float, spent: float, share: float) -
     return max(0.0, min(epsilon, share * (budget - spent)))
 
 
-def check_budget(value: Any, name: str = "risk_budget") -> float | None:
-    """``value`` as an episode risk budget: None, or a finite number >= 0; else ``ValueError``
+RESOLUTION = 1e-6
+"""The solvers' constraint tolerance in the budget row's units (the severity's scale): the plan keeps
+this many scales of the budget unspent besides ``backoff B``."""
+MIN_BUDGET = 1e-5
+"""The smallest budget > 0 [the severity's scale]: below it the spare would eat most of it."""
+MAX_BUDGET = 1e6
+"""The largest budget [the severity's scale]: the row's values keep a resolution of 1e-10 scales."""
+MAX_WEIGHT = 1e6
+"""The largest risk weight times the severity's scale [cost]. Heavier weights buy nothing but
+harder problems (with the probability severity at medium uncertainty, seed 1: from 1e4 on, calls
+run to their iteration limit and fallbacks act), and near 1e200 per scale the objective's Hessian
+overflows: fatrop's inertia correction then never ends (:mod:`agents.mpc.nlp.calls`)."""
+
+
+def check_budget(
+    value: Any, name: str = "risk_budget", scale: float | None = None, unit: str = ""
+) -> float | None:
+    """``value`` as an episode risk budget: None, 0 or a finite number within [``MIN_BUDGET``,
+    ``MAX_BUDGET``] times ``scale`` (the severity's; no range without it); else ``ValueError``
     naming it."""
     if value is None:
         return None
-    return _nonnegative(value, name, "an episode risk budget [the severity's unit]")
+    budget = _nonnegative(value, name, "an episode risk budget [the severity's unit]")
+    if scale is not None and budget > 0.0 and not MIN_BUDGET * scale <= budget <= MAX_BUDGET * scale:
+        raise ValueError(
+            f"{name} must be 0 or within [{MIN_BUDGET * scale:g}, {MAX_BUDGET * scale:g}] {unit}".rstrip()
+            + f" ({MIN_BUDGET:g} to {MAX_BUDGET:g} times the severity's scale of {scale:g}), got {value!r}"
+        )
+    return budget
 
 
-def check_weight(value: Any, name: str = "risk_weight") -> float | None:
-    """``value`` as the risk weight of the objective: None, or a finite number >= 0."""
+def check_weight(
+    value: Any, name: str = "risk_weight", scale: float | None = None, unit: str = ""
+) -> float | None:
+    """``value`` as the risk weight of the objective: None, or a finite number >= 0, at most
+    ``MAX_WEIGHT / scale`` (no limit without ``scale``)."""
     if value is None:
         return None
-    return _nonnegative(value, name, "a weight [cost per unit of the severity]")
+    weight = _nonnegative(value, name, "a weight [cost per unit of the severity]")
+    if scale is not None and weight * scale > MAX_WEIGHT:
+        per = f" per {unit}" if unit else ""
+        raise ValueError(
+            f"{name} must be at most {MAX_WEIGHT / scale:g}{per} ({MAX_WEIGHT:g} over the severity's "
+            f"scale of {scale:g}), got {value!r}"
+        )
+    return weight
 
 
 def _nonnegative(value: Any, name: str, what: str) -> float:
@@ -132,12 +177,17 @@ def effective_tolerance(epsilon: float, budget: float | None, backoff: float, sc
     return min(epsilon, budget + backoff * scale)
 
 
-def terms_parameters(budget: float | None, spent: float, weight: float | None) -> np.ndarray:
-    """The :data:`agents.mpc.nlp.parameters.TERMS` solver parameters: (B, spent, 1/B, switch-off,
-    w); without a budget (or at B = 0, where epsilon = 0 holds every R_n at 0) the row is switched off."""
+def terms_parameters(
+    budget: float | None, spent: float, weight: float | None, scale: float = 1.0, backoff: float = 1e-3
+) -> np.ndarray:
+    """The :data:`agents.mpc.nlp.parameters.TERMS` solver parameters: (B', spent, nu = 1/scale,
+    switch-off, w), B' such that the budget row ``(B' - spent - R_N) nu - c_N >= backoff`` holds iff
+    the plan's ``spent + sum_n R_n <= B - backoff B - RESOLUTION scale``; without a budget (or at B =
+    0, where epsilon = 0 holds every R_n at 0) the row is switched off."""
     on = budget is not None and budget > 0.0
+    shifted = budget - backoff * budget - RESOLUTION * scale + backoff * scale if on else 0.0
     out = np.array(
-        [budget or 0.0, spent, 1.0 / budget if on else 0.0, 0.0 if on else 1.0, weight or 0.0], dtype=float
+        [shifted, spent, 1.0 / scale if on else 0.0, 0.0 if on else 1.0, weight or 0.0], dtype=float
     )
     assert out.size == TERMS
     return out

@@ -41,6 +41,7 @@ import casadi as ca
 import numpy as np
 
 from agents.mpc.nlp.budget import CallTimes
+from agents.mpc.nlp.calls import BoundPattern, BoundPatternError, bound_pattern
 from agents.mpc.nlp.compiled import DEFAULT_JIT_CACHE, compiled_library, have_c_compiler
 from agents.mpc.nlp.ocp import (
     EARLY_WEIGHT,
@@ -60,7 +61,6 @@ from risk_env.models.path import project
 from risk_env.scenario.scenario import Scenario
 
 SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
-IPOPT_SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 USEFUL_RUNG = 2.0
 """A fatrop rung is built when its iterations at the prior time per iteration take at most this
 many step caps (a larger one could never fit the time left in a step)."""
@@ -224,7 +224,10 @@ class Problem:
     acc_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
     acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    """Rows of g of c_{n+1} = c_n + R_n, n = 0..N-1 (empty without a budget)."""
+    """Rows of g of c_{n+1} = c_n + nu R_n, n = 0..N-1 (empty without a budget)."""
+    pattern: BoundPattern | None = None
+    """The split of the bounds into equalities and inequalities that every call keeps
+    (:func:`agents.mpc.nlp.calls.bound_pattern`; checked by :func:`agents.mpc.nlp.calls.call_solver`)."""
 
     @property
     def n_w(self) -> int:
@@ -322,7 +325,9 @@ def build_problem(
     u_index = np.array([[index[(n, "u", i)] for i in range(NU)] for n in range(N)])
     slack_index = np.array([i for i, tag in enumerate(w_tags) if tag[1] == "s"], dtype=int)
     layout = (x_index, u_index, lbg, ubg, risk_shape, slack_index, slots)
-    prior, failing = iteration_times(smallest, scenario, *layout)
+    lbx, ubx = variable_bounds(scenario, x_index, u_index, len(w_tags), np.zeros(NX), slack_index)
+    pattern = bound_pattern(lbx, ubx, lbg, ubg)
+    prior, failing = iteration_times(smallest, scenario, *layout, pattern=pattern)
     cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
     rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
     solvers = [make(r) for r in rungs] + [smallest]
@@ -359,6 +364,7 @@ def build_problem(
         times=CallTimes(limits, prior, failing),
         acc_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "c"], dtype=int),
         acc_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "accumulate"], dtype=int),
+        pattern=pattern,
     )
 
 
@@ -373,15 +379,17 @@ def iteration_time(
     slack_index: np.ndarray,
     slots: int = 1,
     repeats: int = 2,
+    pattern: BoundPattern | None = None,
 ) -> float:
     """The time of one solver iteration [s] on the scenario's start (its objects in the first
     slots, all active, the rest absent; epsilon; zero risk data) from rest: the fastest of
     ``repeats`` calls (the first also pays one-time set-up).
 
-    The bounds have the steps' pattern (which entries are fixed, which infinite; the slacks >= 0):
-    CasADi 3.8's fatrop splits the bounds into equalities and inequalities at every call, and once a
-    solver was called with another split, its later calls ignore ``max_iter`` and run on with
-    fatrop's default options."""
+    The bounds have the steps' ``pattern`` (which entries are fixed, which infinite; the slacks
+    >= 0; :class:`agents.mpc.nlp.calls.BoundPatternError` otherwise): CasADi 3.8's fatrop splits the bounds
+    into equalities and inequalities at every call, and once a solver was called with another
+    split, its later calls ignore ``max_iter`` and run on with fatrop's default options
+    (:mod:`agents.mpc.nlp.calls`)."""
     N, n_w = scenario.horizon, solver.size_in("x0")[0]
     x, y, theta = scenario.ego.start.as_tuple()
     x0 = np.array([x, y, theta, float(project(scenario.path, x, y)), *scenario.ego.initial_input])
@@ -396,6 +404,8 @@ def iteration_time(
     p = parameter_vector(scenario.risk_tolerance, scenario.ego.v_ref, measurements, active, numbers, data)
     p = np.concatenate([p, np.zeros(solver.size_in("p")[0] - len(p))])  # risk terms: off
     lbx, ubx = variable_bounds(scenario, x_index, u_index, n_w, x0, slack_index)
+    if pattern is not None and bound_pattern(lbx, ubx, lbg, ubg) != pattern:
+        raise BoundPatternError("the timing calls' bounds split otherwise than the steps'")
     w0 = np.zeros(n_w)
     w0[x_index] = x0
     best = math.inf
@@ -409,7 +419,9 @@ def iteration_time(
     return best if math.isfinite(best) else 1e-3
 
 
-def iteration_times(solver: ca.Function, scenario: Scenario, *layout: Any) -> tuple[float, float]:
+def iteration_times(
+    solver: ca.Function, scenario: Scenario, *layout: Any, pattern: BoundPattern | None = None
+) -> tuple[float, float]:
     """The priors of :class:`agents.mpc.nlp.budget.CallTimes`: the time per iteration [s] of ``solver``
     on the scenario's start, and on the same start with a parked object 1 m ahead of the ego,
     inside its boxes at every step (a failing call's, whose line searches evaluate more)."""
@@ -417,28 +429,7 @@ def iteration_times(solver: ca.Function, scenario: Scenario, *layout: Any) -> tu
     swallowed = scenario.replace(
         object_start=(x + math.cos(theta), y + math.sin(theta), theta), object_speed=0.0, object_turn_rate=0.0
     )
-    return iteration_time(solver, scenario, *layout), iteration_time(solver, swallowed, *layout)
-
-
-def call_solver(
-    problem: Problem, args: dict[str, Any], solver: str, rung: int = 0
-) -> tuple[dict[str, np.ndarray], str, bool, int, dict[str, float]]:
-    """One solver call at ``rung``: ``(outputs, status, success, iterations, wall times)``; never
-    raises."""
-    function = problem.solvers[rung]
-    try:
-        with np.errstate(all="ignore"):
-            res = function(**args)
-        stats = function.stats()
-    except Exception as err:  # never raise inside an episode
-        return {}, f"exception: {err}", False, 0, {}
-    out = {k: np.asarray(v).ravel() for k, v in res.items()}
-    if solver == "ipopt":
-        status = str(stats.get("return_status", "unknown"))
-        ok = status in IPOPT_SUCCESS
-    else:
-        status = str(stats.get("unified_return_status", stats.get("return_status", "unknown")))
-        ok = bool(stats.get("success", False))
-    ok = ok and all(np.all(np.isfinite(out[k])) for k in ("x", "lam_x", "lam_g", "f"))
-    times = {k: float(v) for k, v in stats.items() if k.startswith("t_wall_") and v}
-    return out, status, ok, int(stats.get("iter_count", 0)), times
+    return (
+        iteration_time(solver, scenario, *layout, pattern=pattern),
+        iteration_time(solver, swallowed, *layout, pattern=pattern),
+    )
