@@ -48,6 +48,8 @@ TOLERANCES = (0.0, 0.05, 1.0, math.inf)
 """epsilon in scales (inf: no per-step bound; drawn only with a budget)."""
 BUDGETS = (None, 0.0, 1e-5, 5e-5, 1e-3, 0.1, 1.0, 1e6)
 """B in scales (None: no budget)."""
+ALLOCATIONS = ("share", "horizon")
+"""How a drawn budget is spent (``"horizon"``: the NLP's budget row and accumulator)."""
 WEIGHTS = (None, 1e-3, 1.0, 1e3, 1e6)
 """w times the scale (None: no weight)."""
 MAX_STEPS = 40
@@ -63,6 +65,7 @@ ROW_COLUMNS = (
     "severity",
     "epsilon",
     "budget",
+    "allocation",
     "weight",
     "outcome",
     "steps",
@@ -110,12 +113,15 @@ class Setting:
     epsilon: float
     budget: float | None
     weight: float | None
+    allocation: str = "share"
+    """How the SMPC spends its budget (``"share"`` or ``"horizon"``: the NLP's budget row)."""
 
     def options(self) -> dict[str, Any]:
         """The agent's keyword arguments besides the env."""
         out: dict[str, Any] = {"risk_tolerance": self.epsilon}
         if self.budget is not None:
             out["risk_budget"] = self.budget
+            out["budget_allocation"] = self.allocation
         if self.weight is not None:
             out["risk_weight"] = self.weight
         if self.group == "smpc_mc":
@@ -126,8 +132,7 @@ class Setting:
 def make_settings(groups: list[str], count: int, seed: int, scenes: list[Scene]) -> list[Setting]:
     """``count`` settings drawn over ``groups`` (by the shares of the module), setting i on
     ``scenes[i]``."""
-    from risk_env.severity import make_severity
-
+    from risk_env.risk.severity import make_severity
     from risk_env.scenario import Scenario
 
     out = []
@@ -140,12 +145,14 @@ def make_settings(groups: list[str], count: int, seed: int, scenes: list[Scene])
         severity = SEVERITIES[int(rng.integers(len(SEVERITIES)))]
         scale = make_severity(Scenario(severity=severity)).scale
         budget = weight = None
+        allocation = "share"
         if group == "rmpc":
             epsilon = float(TOLERANCES[int(rng.integers(3))])
         else:
             budget = BUDGETS[int(rng.integers(len(BUDGETS)))]
             weight = WEIGHTS[int(rng.integers(len(WEIGHTS)))]
             epsilon = float(TOLERANCES[int(rng.integers(4 if budget is not None else 3))])
+            allocation = ALLOCATIONS[int(rng.integers(len(ALLOCATIONS)))]
         out.append(
             Setting(
                 group,
@@ -154,6 +161,7 @@ def make_settings(groups: list[str], count: int, seed: int, scenes: list[Scene])
                 epsilon * scale,
                 None if budget is None else budget * scale,
                 None if weight is None else weight / scale,
+                allocation,
             )
         )
     return out
@@ -183,6 +191,7 @@ def run_setting(setting: Setting, extra: tuple[tuple[str, Any], ...] = ()) -> di
         "severity": setting.severity,
         "epsilon": setting.epsilon,
         "budget": "" if setting.budget is None else setting.budget,
+        "allocation": "" if setting.budget is None else setting.allocation,
         "weight": "" if setting.weight is None else setting.weight,
         "_call_ms": np.zeros(0),
         "_step_ms": np.zeros(0),

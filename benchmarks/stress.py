@@ -304,8 +304,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--agents",
         default=None,
         help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]"
-        f" (smpc:monte_carlo: slow; default {','.join(DEFAULT_AGENTS)}); with --family cap, groups"
-        f" from {','.join(cap_family.GROUPS)} (default: all)",
+        f" (smpc:monte_carlo: slow); with --family cap, groups from {','.join(cap_family.GROUPS)}"
+        f" (default: {','.join(DEFAULT_AGENTS)}; with --family cap, every group)",
     )
     p.add_argument(
         "--max-solve-time",

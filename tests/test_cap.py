@@ -83,14 +83,17 @@ def row_gradients(agent, obs: np.ndarray) -> dict[str, float]:
 
 
 # ----------------------------------------------------------------------------- the settings that hung
-def test_the_budget_that_never_returned_now_solves_within_its_limits() -> None:
+@pytest.mark.parametrize("allocation", ["horizon", "share"])
+def test_the_budget_that_never_returned_now_solves_within_its_limits(allocation: str) -> None:
     """Issue 21: ``risk_budget=0.01`` (paper severity, J) at medium uncertainty, seed 20011: the first
-    call never returned (its budget row's gradient was 1.5e4). Uncapped: one rung of 150."""
+    call never returned (the NLP's budget row, ``"horizon"``, had a gradient of 1.5e4). Uncapped:
+    one rung of 150."""
     env = gym.make("RiskCrossing-v0", uncertainty="medium")
-    agent = SMPC.from_env(env, risk_budget=0.01, max_solve_time=math.inf)
+    agent = SMPC.from_env(env, risk_budget=0.01, budget_allocation=allocation, max_solve_time=math.inf)
     records = run_steps(agent, env, seed=20011, steps=3)
     assert_within_limits(records)
-    assert {c.variant for c in records} <= {"zero", "zero_soft", "free"}
+    if allocation == "horizon":
+        assert {c.variant for c in records} <= {"zero", "zero_soft", "free"}
     report = agent.last_solve  # every step reports each of its calls
     assert report.iterations == sum(c.iterations for c in report.calls)
     assert report.overran_calls == 0 and report.failed_calls == sum(not c.success for c in report.calls)
@@ -101,7 +104,7 @@ def test_the_budget_under_the_default_cap_keeps_every_rung_limit() -> None:
     """The same setting under the default 100 ms cap: each call at the rung the budget chose, within
     that rung's iteration limit (which rungs run depends on the machine; the limits do not)."""
     env = gym.make("RiskCrossing-v0", uncertainty="medium")
-    agent = SMPC.from_env(env, risk_budget=0.01)
+    agent = SMPC.from_env(env, risk_budget=0.01, budget_allocation="horizon")
     records = run_steps(agent, env, seed=20011, steps=3)
     assert_within_limits(records, some=False)
     limits = dict(enumerate(lim for lim, _ in agent._problem("zero").limits))
@@ -124,6 +127,7 @@ def test_every_row_keeps_the_risk_rows_scale(severity: str) -> None:
         agent = SMPC.from_env(
             env,
             risk_budget=budget,
+            budget_allocation="horizon",
             risk_weight=rb.MAX_WEIGHT / scale,
             risk_tolerance=math.inf,
             max_solve_time=math.inf,
@@ -252,7 +256,7 @@ REALISTIC = [
 def test_the_realistic_budgets_keep_every_limit(level: str, budget: float, tolerance: float) -> None:
     """Issue 21's 18 settings (one hung at its third step), under the default cap, 8 steps."""
     env = gym.make("RiskCrossing-v0", uncertainty=level)
-    agent = SMPC.from_env(env, risk_budget=budget, risk_tolerance=tolerance)
+    agent = SMPC.from_env(env, risk_budget=budget, risk_tolerance=tolerance, budget_allocation="horizon")
     assert_within_limits(run_steps(agent, env, seed=20011, steps=8), some=False)
 
 
@@ -275,8 +279,9 @@ def test_the_family_keeps_every_limit(severity, level, budget, weight, seed) -> 
     scale = scale_of(severity)
     env = gym.make("RiskCrossing-v0", uncertainty=level, severity=severity)
     options = {"risk_tolerance": math.inf if weight is None else scale}
-    if budget is not None:
+    if budget is not None:  # the NLP's budget row on one seed, the default share on the other
         options["risk_budget"] = budget * scale
+        options["budget_allocation"] = "horizon" if seed < 100 else "share"
     if weight is not None:
         options["risk_weight"] = weight / scale
     agent = SMPC.from_env(env, max_solve_time=math.inf, **options)

@@ -264,6 +264,8 @@ def bad_values(action: argparse.Action) -> list[str]:
         return TEXT[action.dest]
     if action.dest in ("tolerances", "budgets"):  # sampled: [SEVERITY=]EPS,...
         return ["", "x", "-1", "energy=1"]
+    if action.dest == "agents":  # stress: agent names, or the cap family's groups
+        return LISTS
     if action.dest == "agent":  # rollout
         return ["", "x", "smpc0"]
     return []
