@@ -1,10 +1,10 @@
-"""The risk of a mixture of modes (:class:`~risk_env.prediction.mixture.Mixture`) with any
+r"""The risk of a mixture of modes (:class:`~risk_env.prediction.mixture.Mixture`) with any
 estimator of :mod:`risk_env.risk.estimators`.
 
-- An expectation (exact, Monte Carlo): ``R = sum_m w_m R_m``, exact by linearity of expectation
-  (the road user follows mode m with probability w_m), as the sum over objects is.
-- A worst case (worst case, grid): ``max_m R_m`` over the modes of weight at least ``threshold``
-  (w_min; and above 0): the robust planner's view, no expectation to weigh.
+- An expectation (exact, Monte Carlo): $R = \sum_m w_m R_m$, exact by linearity of expectation
+  (the road user follows mode $m$ with probability $w_m$), as the sum over objects is.
+- A worst case (worst case, grid): $\max_m R_m$ over the modes of weight at least ``threshold``
+  ($w_{\min}$; and above 0): the robust planner's view, no expectation to weigh.
 """
 
 from __future__ import annotations
