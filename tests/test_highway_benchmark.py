@@ -102,7 +102,8 @@ def test_the_options_reach_the_mpcs():
     assert smpc.slots == 2 and smpc.base_scenario.severity == "probability"
     rmpc = make_driver(resolve("rmpc", "probability", 0.03), env, args, "constant")
     assert "risk_budget" not in rmpc.make_agent.factory.keywords
-    assert make_driver(resolve("rmpc", "probability", 0.03), env, args, "lane").predictor is None  # built per episode
+    lane = make_driver(resolve("rmpc", "probability", 0.03), env, args, "lane")
+    assert lane.predictor is None  # built on the road network at the first episode
 
 
 def test_lane_pieces_reach_the_mpcs_predictor_and_size_their_mode_slots():
