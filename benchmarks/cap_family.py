@@ -1,6 +1,6 @@
 """The stress benchmark's ``--family cap``: does every solver call stay within the step's cap?
 
-    python -m benchmarks.stress --family cap --scenes 600 --workers 1 --out docs/results/cap
+    python -m benchmarks.stress --family cap --scenes 500 --workers 2 --out docs/results/cap
 
 Setting i pairs the stress scene i (:func:`benchmarks.scenes.make_scenes`) with an agent drawn
 from ``default_rng([seed, i, 7])``: the RMPC (a fifth of the settings), the exact SMPC (three

@@ -209,6 +209,14 @@ def discount(text: str) -> float:
     return value
 
 
+def positive_or_inf(text: str) -> float:
+    """``type=`` of a length or size > 0, ``inf`` for none."""
+    value = _number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0 or inf, got {text!r}")
+    return value
+
+
 def time_cap(text: str) -> float:
     """``type=`` of a wall-time cap [s]: > 0, ``inf`` for none."""
     value = _number(text)

@@ -25,6 +25,9 @@ from benchmarks.agent_names import AgentName, number, parse_agent
 
 KINDS = ("rmpc", "smpc", "idm")
 """The kinds of agent the intersection commands run."""
+ADAPTER_CORRIDOR = 1.0
+"""The adapter's corridor [m] (:data:`risk_env.highway.adapter.ADAPTER_DEFAULTS`) when the options
+name none."""
 DEFAULT_BUDGET = 0.05
 """B of the plain ``smpc`` [the severity's unit per episode]: a 5 % chance of a collision per
 episode in the probability severity."""
@@ -162,4 +165,5 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         severity=agent.severity or args.severity,
         slots=args.slots,
         predictor=predictor,
+        corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
     )

@@ -53,6 +53,7 @@ from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, check_budget, resol
 from benchmarks.highway_episodes import ENV_DEFAULTS, crash_kind, run_chunk
 from benchmarks.highway_tables import markdown, summarise, write_csvs
 from benchmarks.sweep import run_sweep
+from risk_env.highway.adapter import ADAPTER_DEFAULTS
 from risk_env.prediction.predictors import PREDICTOR_NAMES
 from risk_env.scenario.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
@@ -127,6 +128,13 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         type=cli.unit_interval_closed,
         default=MODE_THRESHOLD,
         help="w_min: the RMPC plans against every predicted mode of at least this weight",
+    )
+    parser.add_argument(
+        "--corridor",
+        type=cli.positive_or_inf,
+        default=ADAPTER_DEFAULTS["corridor"],
+        help="half width [m] around the lane's centreline that the MPCs' planned centre keeps within"
+        " (inf: none, the ego may leave its lane)",
     )
     parser.add_argument(
         "--lane-pieces",

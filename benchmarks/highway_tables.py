@@ -123,6 +123,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f" {args.seed}..{args.seed + args.episodes - 1} (N = {args.episodes} per agent, the same for"
         f" all), uncertainty {args.uncertainty}, {args.slots} object slots, mode threshold"
         f" {args.mode_threshold:g}, budget share {args.budget_share:g}"
+        f", corridor {getattr(args, 'corridor', 1.0):g} m"
         f"{'' if getattr(args, 'lane_pieces', 1) == 1 else f', lane predictor in {args.lane_pieces} pieces'}"
         "; the MPCs plan with the"
         f" predictor in brackets. Risk scored by RiskCostWrapper (exact, severity {args.severity},"

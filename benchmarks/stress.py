@@ -2,7 +2,7 @@
 
     python -m benchmarks.stress            # 200 scenes x rmpc, smpc:paper:0, smpc:paper:1000
     python -m benchmarks.stress --scenes 20 --agents rmpc --out results/stress20
-    python -m benchmarks.stress --family cap --scenes 600 --workers 1 --out docs/results/cap
+    python -m benchmarks.stress --family cap --scenes 500 --workers 2 --out docs/results/cap
 
 The scenes (:mod:`benchmarks.scenes`): starts near the path; objects close by, crossing the path,
 or never crossing it; every uncertainty level of Table I and an enlarged growth; v_ref from 1 to

@@ -240,6 +240,7 @@ NUMBERS = {
     "discount": ["0", "2", "-1", "nan", "x"],
     "fraction": ["0", "1.5", "-0.5", "nan", "x"],
     "time_cap": ["0", "-1", "nan", "x", ""],
+    "positive_or_inf": ["0", "-1", "nan", "-inf", "x", ""],
 }
 """Bad values of each checked ``type=`` of :mod:`benchmarks.cli`."""
 LISTS = ["", ",", " , ", "a,,b", "@@@", "-1"]

@@ -55,6 +55,7 @@ from agents.mpc.fallback import feasible_action
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.ocp import soft_variant, variable_bounds
 from agents.mpc.nlp.solver import Problem, SolverSettings
+from risk_env.models.path import lateral_offset
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import WorstCaseRisk
 from risk_env.scenario.scenario import Scenario
@@ -67,6 +68,9 @@ SOFT_ITERATIONS = 30
 """Iterations a soft solve is given time for, before the hard problem's calls."""
 FEASIBLE_SLACK = 1e-4
 """Slacks up to this [margin units] count as zero: the hard problem was feasible."""
+CORRIDOR_REENTRY = 0.5
+"""How much wider [m] than its start's lateral offset the corridor is for an ego that starts outside
+it."""
 MANOEUVRE_TIME = 3e-3
 """Time [s] kept for choosing the manoeuvre before it was first measured."""
 
@@ -290,13 +294,31 @@ class Step:
         lbx, ubx = variable_bounds(
             self.context.scenario, pr.x_index, pr.u_index, pr.n_w, self.x0, pr.slack_index
         )
-        return {"lbx": lbx, "ubx": ubx, "lbg": self.lbg(pr), "ubg": pr.ubg, "p": self.p}
+        return {"lbx": lbx, "ubx": ubx, "lbg": self.lbg(pr), "ubg": self.ubg(pr), "p": self.p}
+
+    def corridor(self) -> float:
+        """The corridor's half width [m] for this step: the path's, or for an ego that starts
+        outside it its own offset plus :data:`CORRIDOR_REENTRY` (so that the start alone never makes
+        the problem infeasible)."""
+        path = self.context.scenario.path
+        offset = abs(float(lateral_offset(path, self.x0[0], self.x0[1])))
+        return path.corridor if offset <= path.corridor else offset + CORRIDOR_REENTRY
 
     def lbg(self, pr: Problem) -> np.ndarray:
         """The rows' lower bounds, the risk rows' at the back-off."""
         lbg = pr.lbg.copy()
         lbg[pr.risk_rows] = self.context.backoff
+        if pr.corridor_rows.size:
+            lbg[pr.corridor_rows] = -self.corridor()
         return lbg
+
+    def ubg(self, pr: Problem) -> np.ndarray:
+        """The rows' upper bounds (the corridor's as :meth:`corridor`)."""
+        if not pr.corridor_rows.size:
+            return pr.ubg
+        ubg = pr.ubg.copy()
+        ubg[pr.corridor_rows] = self.corridor()
+        return ubg
 
     def guesses(
         self, pr: Problem, extra: bool, cold: bool = True, cold_first: bool = False

@@ -98,10 +98,13 @@ ADAPTER_DEFAULTS: dict[str, Any] = {
     "v_max": 10.0,
     "ego_radius": 2.0,
     "object_radius": 2.0,
+    "corridor": 1.0,
 }
 """Scenario values the adapter changes from the paper's for the intersection: v_ref 8 m/s (the
 lanes' limit and the ego's entry speed are 10), no reversing on a road, v_max 10 m/s, discs of
-2 m (highway-env's 5 x 2 m cars touch at centre distances of 2 to 5.4 m; two 2 m discs at 4 m)."""
+2 m (highway-env's 5 x 2 m cars touch at centre distances of 2 to 5.4 m; two 2 m discs at 4 m),
+a corridor of 1 m about the lane's centreline for the planned centre (the 2 m wide car stays in
+its 4 m lane: the MPC may not leave the road to escape a prediction)."""
 
 TRACK_GATE = 2.0
 """Largest distance [m] between a vehicle and where one seen a step earlier was predicted to be,

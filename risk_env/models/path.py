@@ -110,6 +110,19 @@ def project(path: AnyPath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
     return ops.atan2(k * px, 1.0 - k * py) / k
 
 
+def lateral_offset(path: ReferencePath, x: Any, y: Any, ops: Ops = NUMPY) -> Any:
+    r"""Signed distance [m] of ``(x, y)`` [m] from the (continued) arc, positive to its left:
+    $(1 - \sqrt{(\kappa p_x)^2 + (1 - \kappa p_y)^2}) / \kappa$ in the goal's frame (the arc's centre
+    at $(0, 1/\kappa)$), $p_y$ on a straight path."""
+    gx, gy, _, cg, sg = _goal_frame(path)
+    px = cg * (x - gx) + sg * (y - gy)
+    py = -sg * (x - gx) + cg * (y - gy)
+    k = path.curvature
+    if k == 0.0:
+        return py
+    return (1.0 - ops.sqrt((k * px) ** 2 + (1.0 - k * py) ** 2)) / k
+
+
 def timing_law(path: AnyPath, lam: Any, theta: Any, u2: Any, dt: float, ops: Ops = NUMPY) -> Any:
     r"""$\lambda^+ = \lambda + u_2 \cos(\theta - \theta_P(\lambda))\, T$ (paper Sec. VI-B)."""
     theta_p = path.goal.theta + path.curvature * lam

@@ -209,10 +209,18 @@ class ReferencePath:
     r"""$\kappa$ [1/m]; positive turns left, 0 is a straight line."""
     lambda_start: float = -95.0
     r"""$\lambda_0$ [m]: the arc length of the path's first point; the goal is at $\lambda_g = 0$."""
+    corridor: float = math.inf
+    """Half width [m] of the corridor around the (continued) arc that an MPC's planned ego centre
+    keeps within at n = 1..N, measured across the arc (a lane: its half width less the ego's);
+    ``inf``: none (the paper's)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "goal", Pose.of(self.goal, "path.goal"))
         set_numbers(self, "path.", ("curvature", "lambda_start"))
+        corridor = checks.real("path.corridor", self.corridor)
+        if not corridor > 0:
+            raise ValueError(f"path.corridor must be > 0 [m] (inf: none), got {self.corridor!r}")
+        object.__setattr__(self, "corridor", float(corridor))
         if self.lambda_start >= 0:
             raise ValueError(f"path.lambda_start must be < 0 (goal at 0), got {self.lambda_start}")
         if abs(self.curvature * self.lambda_start) >= math.pi:

@@ -319,6 +319,7 @@ OVERRIDES: Mapping[str, tuple[str | None, str]] = {
     "goal": ("path", "goal"),
     "curvature": ("path", "curvature"),
     "lambda_start": ("path", "lambda_start"),
+    "corridor": ("path", "corridor"),
     "dt": (None, "dt"),
     "horizon": (None, "horizon"),
     "cost_weights": (None, "cost_weights"),

@@ -82,7 +82,7 @@ from agents.mpc.nlp.parameters import (
 from risk_env.models.dynamics import casadi_step
 from risk_env.models.frame import to_frame
 from risk_env.models.ops import CASADI
-from risk_env.models.path import path_error, timing_law
+from risk_env.models.path import lateral_offset, path_error, timing_law
 from risk_env.prediction.belief import Belief, predict
 from risk_env.scenario.scenario import Pose, Scenario
 
@@ -319,6 +319,13 @@ def assemble(
             w.append(s_budget)
             w_tags.append((N, "s", 1))
 
+    def add_corridor(n: int) -> None:
+        """|lateral offset of state n from the arc| <= the path's corridor (none when infinite);
+        a step may widen it for an ego that starts outside (``Step.bounds``)."""
+        c = sc.path.corridor
+        if math.isfinite(c):
+            add_g(lateral_offset(sc.path, X[n][0], X[n][1], CASADI), -c, c, n, "corridor")
+
     def add_accumulator(n: int) -> None:
         """c_{n+1} = c_n + normaliser * R_n (c_1 = 0), the gap row's last component: stage-local."""
         if C and n < N:
@@ -337,12 +344,14 @@ def assemble(
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
             cost += add_risk(n)
+            add_corridor(n)
         cost += w_v * (U[n][2] - p_vref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
     w += [X[N], *([C[N]] if C else [])]
     w_tags += [(N, "x", i) for i in range(NX)] + ([(N, "c", 0)] if C else [])
     add_slack(N)
     cost += add_risk(N)
+    add_corridor(N)
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
     return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
 

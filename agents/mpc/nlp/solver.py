@@ -225,6 +225,9 @@ class Problem:
     """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
     acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     """Rows of g of c_{n+1} = c_n + nu R_n, n = 0..N-1 (empty without a budget)."""
+    corridor_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """Rows of g of the lateral offsets at n = 1..N, within +- the path's corridor (empty
+    without one)."""
     pattern: BoundPattern | None = None
     """The split of the bounds into equalities and inequalities that every call keeps
     (:func:`agents.mpc.nlp.calls.bound_pattern`; checked by :func:`agents.mpc.nlp.calls.call_solver`)."""
@@ -334,6 +337,7 @@ def build_problem(
     limits = tuple(ladder[r] for r in rungs) + (ladder[-1],)
 
     risk_rows = [i for i, tag in enumerate(g_tags) if tag[1] in ("risk", "budget")]
+    corridor_rows = [i for i, tag in enumerate(g_tags) if tag[1] == "corridor"]
     slacks = {tag: j for j, tag in enumerate(tag for tag in w_tags if tag[1] == "s")}
     # the slack of each risk row: its stage's (n, "s", 0), the budget row's (N, "s", 1)
     row_slack = np.array(
@@ -353,6 +357,7 @@ def build_problem(
         x_index=x_index,
         u_index=u_index,
         risk_rows=np.array(risk_rows, dtype=int),
+        corridor_rows=np.array(corridor_rows, dtype=int),
         row_slack=row_slack,
         slack_index=slack_index,
         slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
