@@ -77,10 +77,9 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     | 11 + 6 i .. 13 + 6 i | object $i$'s measured pose $c_1, c_2, \theta$ (wrapped) | m, m, rad |
     | 14 + 6 i, 15 + 6 i | object $i$'s measured inputs $v, \omega$ | m/s, rad/s |
 
-    The path error is $e = (c_1 - c_{1,P}, c_2 - c_{2,P}, \theta - \theta_P, v - v_{ref})$, the pose
-    against the path's point at $\lambda$, the speed against $v_{ref}$. Object $i$ of the scenario
-    fills slot $i$; slots beyond the episode's objects are absent. The objects are measured exactly;
-    their uncertainty is that of their *future*.
+    The path error at $\lambda$ is $e = (c_1 - c_{1,P}, c_2 - c_{2,P}, \theta - \theta_P, v - v_{ref})$.
+    Object $i$ of the scenario fills slot $i$; slots beyond the episode's objects are absent. The
+    objects are measured exactly; their uncertainty is that of their *future*.
 
     ## Transition
 
@@ -135,8 +134,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Arguments
 
     - ``uncertainty``: the paper's Table I preset, ``"low"`` (default), ``"medium"`` or ``"high"``;
-    - ``risk_tolerance``: $\epsilon$ [J for the paper's severity]; ``info["risk_violation"]`` is
-      ``risk > epsilon``;
+    - ``risk_tolerance``: $\epsilon$ [J for the paper's severity]; ``risk_violation`` is $R > \epsilon$;
     - ``risk_estimator``: ``"exact"`` (default), ``"monte_carlo"`` ($J$ = ``mc_samples``),
       ``"worst_case"`` or ``"grid"`` (:data:`risk_env.ESTIMATOR_NAMES`), one per object;
     - ``object_motion``: ``"paper"`` or ``"sampled"`` (see Transition);
