@@ -136,7 +136,8 @@ class Builder:
 def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any:
     """The driver of ``agent`` for ``env``: the IDM, or the MPC through
     :class:`risk_env.highway.IntersectionAdapter` with ``predictor`` and the options of ``args``
-    (``uncertainty``, ``slots``, ``max_solve_time``, ``mode_threshold``, ``budget_share``)."""
+    (``uncertainty``, ``slots``, ``max_solve_time``, ``mode_threshold``, ``budget_share``,
+    ``lane_pieces``)."""
     from agents import RMPC, SMPC
     from risk_env.highway import IDMEgo, IntersectionAdapter
 
@@ -149,6 +150,11 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         options["risk_tolerance"] = agent.tolerance
         if agent.budget is not None:
             options |= {"risk_budget": agent.budget, "budget_share": args.budget_share}
+    pieces = getattr(args, "lane_pieces", 1)
+    if predictor == "lane" and pieces > 1:
+        from risk_env.highway import LanePredictor, policy_period
+
+        predictor = LanePredictor(env.unwrapped.road.network, policy_period(env), pieces=pieces)
     return IntersectionAdapter(
         env,
         Builder(functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options)),

@@ -128,6 +128,13 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         default=MODE_THRESHOLD,
         help="w_min: the RMPC plans against every predicted mode of at least this weight",
     )
+    parser.add_argument(
+        "--lane-pieces",
+        type=cli.positive_int,
+        default=1,
+        help="P: the MPCs' lane predictor splits each route's reachable stretch into P bands, one mode"
+        " each (smaller boxes on curves; the risk is scored with P = 1)",
+    )
     parser.add_argument("--slots", type=cli.positive_int, default=5, help="the MPC's object slots")
     parser.add_argument("--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="Table I level")
     parser.add_argument(

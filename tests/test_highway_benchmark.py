@@ -102,6 +102,21 @@ def test_the_options_reach_the_mpcs():
     assert smpc.slots == 2 and smpc.base_scenario.severity == "probability"
     rmpc = make_driver(resolve("rmpc", "probability", 0.03), env, args, "constant")
     assert "risk_budget" not in rmpc.make_agent.factory.keywords
+    lane = make_driver(resolve("rmpc", "probability", 0.03), env, args, "lane")
+    assert lane.predictor is None  # built on the road network at the first episode
+
+
+def test_lane_pieces_reach_the_mpcs_predictor_and_size_their_mode_slots():
+    args = highway_intersection.parse_args(["--lane-pieces", "3", "--max-solve-time", "inf"])
+    env = make_env(args, "lane")
+    driver = make_driver(resolve("rmpc", "probability", 0.05), env, args, "lane")
+    obs, _ = env.reset(seed=0)
+    driver.reset()
+    driver.predict(obs)
+    assert driver.predictor.pieces == 3 and driver.predictor.max_modes == 9
+    agent = driver._agent_for(driver.lane)
+    assert agent._slots.modes == 9  # one row per piece of each route
+    assert make_driver(resolve("rmpc", "probability", 0.05), env, args, "constant").predictor is None
 
 
 def test_the_adapter_sums_what_its_lane_agents_spent():
@@ -228,6 +243,7 @@ def _fails(module, argv: list[str], flag: str, message: str = "") -> None:
         (["--initial-vehicles", "-1"], "--initial-vehicles", ""),
         (["--mode-threshold", "1.5"], "--mode-threshold", "[0, 1]"),
         (["--mode-threshold", "-0.1"], "--mode-threshold", ""),
+        (["--lane-pieces", "0"], "--lane-pieces", ""),
         (["--budget-share", "0"], "--budget-share", "(0, 1]"),
         (["--predictor", "oracle"], "--predictor", "unknown predictor 'oracle'"),
         (["--predictor", "lane,lane"], "--predictor", "named twice"),

@@ -3,6 +3,7 @@ benchmark on a short episode."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -302,3 +303,34 @@ def test_the_benchmark_scores_a_short_episode(tmp_path):
     text = (tmp_path / "prediction.md").read_text()
     assert "python -m benchmarks.prediction --episodes 1" in text and "lowest coverage" in text
     assert (tmp_path / "prediction.png").stat().st_size > 10_000
+
+
+def test_pieces_split_each_route_into_bands_that_hold_its_arc_in_smaller_boxes(network, predictor):
+    """``pieces=P``: P modes per route, each 1/P of its weight (share 1/P, so a threshold compares
+    the route's weight), their boxes together holding the reachable arc in less area than one."""
+    m = alone(network, ("ir0", "il1", 0), 2.0, 5.0, destination="o1")
+    split = LanePredictor(network, T, pieces=3)
+    assert split.max_modes == 9 and predictor.max_modes == 3
+    whole = [mode for mode in predictor.predict(m, STEPS) if mode.label.startswith("ir0>il1")][0]
+    parts = [mode for mode in split.predict(m, STEPS) if mode.label.startswith("ir0>il1")]
+    assert [p.label.rsplit("#", 1)[1] for p in parts] == ["1/3", "2/3", "3/3"]
+    assert all(p.share == pytest.approx(1 / 3) for p in parts)
+    assert sum(p.weight for p in parts) == pytest.approx(whole.weight)
+    route = Route(network, (("ir0", "il1", 0), ("il1", "o1", 0)))
+    start = route.locate(m[:2])[0]
+    low, high = reach(5.0, 10.0, STEPS, T, 6.0)
+    for n in range(1, STEPS + 1):
+        arc = route.position(np.linspace(start + low[n], start + high[n], 60))
+        assert all(any(samples._inside(p, n, point)[0] for p in parts) for point in arc)
+    area = sum(4 * p.beliefs.half_x[-1] * p.beliefs.half_y[-1] for p in parts)
+    assert area < 0.8 * 4 * whole.beliefs.half_x[-1] * whole.beliefs.half_y[-1]
+    kept = split.predict(m, STEPS).above(whole.weight * 0.99)
+    assert {p.label for p in parts} <= {k.label for k in kept}  # every piece of a likely route
+
+
+def test_a_mode_share_outside_zero_one_is_named(network, predictor):
+    mode = predictor.predict(alone(network, ("o0", "ir0", 0), 20.0, 8.0), STEPS).modes[0]
+    with pytest.raises(ValueError, match=r"modes\[0\].share"):
+        Mixture((dataclasses.replace(mode, share=0.0),))
+    with pytest.raises(ValueError, match="pieces"):
+        LanePredictor(network, T, pieces=0)

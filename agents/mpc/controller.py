@@ -372,11 +372,11 @@ class PathFollowingMPC(RiskForm):
         if memory is not None and measure.new_episode(memory, o):
             memory = None
         x0 = measure.measured_state(self.scenario, o)
-        futures, weights = self._slots.beliefs(self._problem("free"), o)
-        # a row is active when its object is present, its mode counts (the RMPC: w >= w_min) and
-        # it may reach the ego within the horizon
+        futures, weights, hypotheses = self._slots.beliefs(self._problem("free"), o)
+        # a row is active when its object is present, its mode counts (the RMPC: its hypothesis's
+        # weight >= w_min) and it may reach the ego within the horizon
         floor = self.mode_threshold if not self.WEIGHTED else 0.0
-        counts = [f is not None and weights[k] > 0 and weights[k] >= floor for k, f in enumerate(futures)]
+        counts = [f is not None and weights[k] > 0 and hypotheses[k] >= floor for k, f in enumerate(futures)]
         active = np.array([c and self._risk_possible(x0, futures[k], k) for k, c in enumerate(counts)])
         epsilon = self._step_epsilon(index, memory is None)
         variant = self._risk_variant(epsilon) if active.any() else "free"

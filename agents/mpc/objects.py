@@ -96,7 +96,7 @@ class Slots:
         """K, the object slots."""
         self.predictor = predictor
         """The predictor of the given beliefs, or None (the paper's prediction, in the NLP)."""
-        default = 1 if predictor is None else MODES
+        default = 1 if predictor is None else int(getattr(predictor, "max_modes", MODES))
         self.modes = default if modes is None else _count("modes", modes)
         """M, the mode slots per object (1 without a predictor)."""
         if predictor is None and self.modes != 1:
@@ -118,9 +118,11 @@ class Slots:
         """The single-object scenario of ``row``'s object (:func:`slot_scenario`)."""
         return slot_scenario(self.scenario, row // self.modes)
 
-    def beliefs(self, problem: Any, o: Any) -> tuple[list[Belief | None], np.ndarray]:
-        r"""Each row's beliefs at $n = 1, \dots, N$ (None where absent) and its weight ``(K M,)``, for the
-        split observation ``o``: by the built ``problem``'s own prediction, or the predictor's."""
+    def beliefs(self, problem: Any, o: Any) -> tuple[list[Belief | None], np.ndarray, np.ndarray]:
+        r"""Each row's beliefs at $n = 1, \dots, N$ (None where absent), its weight ``(K M,)`` and its
+        hypothesis's weight ``(K M,)`` (weight / share, :attr:`Mode.share
+        <risk_env.prediction.mixture.Mode.share>`: what a mode threshold compares), for the split
+        observation ``o``: by the built ``problem``'s own prediction, or the predictor's."""
         if not self.given:
             futures = [
                 Belief.from_array(np.asarray(problem.beliefs(o.objects[k], self.numbers[k, 2:]))[1:])
@@ -128,12 +130,14 @@ class Slots:
                 else None
                 for k, here in enumerate(o.present)
             ]
-            return futures, np.array([1.0 if f is not None else 0.0 for f in futures])
+            weights = np.array([1.0 if f is not None else 0.0 for f in futures])
+            return futures, weights, weights
         futures: list[Belief | None] = [None] * self.rows
         weights = np.zeros(self.rows)
+        hypotheses = np.zeros(self.rows)
         present = np.flatnonzero(o.present)
         if not len(present):
-            return futures, weights
+            return futures, weights, hypotheses
         steps = self.scenario.horizon
         mixtures = self.predictor.predict_scene(o.objects[present], steps)
         for k, mixture in zip(present.tolist(), mixtures, strict=True):
@@ -149,7 +153,8 @@ class Slots:
                 row = k * self.modes + m
                 futures[row] = Belief.from_array(mode.beliefs.as_array()[1:])
                 weights[row] = mode.weight
-        return futures, weights
+                hypotheses[row] = mode.weight / mode.share
+        return futures, weights, hypotheses
 
     def packing(self, active: np.ndarray, data: bool) -> tuple[int | None, np.ndarray]:
         """``(rows of the NLP, which rows fill them)``: with given beliefs (and no risk data) the

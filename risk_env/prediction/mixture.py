@@ -35,6 +35,10 @@ class Mode:
     weight: float
     beliefs: Belief
     label: str = ""
+    share: float = 1.0
+    """The share in (0, 1] of its hypothesis (a route) this mode is: a predictor that splits a
+    hypothesis into P pieces gives each 1/P of its weight; a threshold compares the hypothesis's
+    weight, ``weight / share`` (:meth:`Mixture.above`)."""
 
     @property
     def steps(self) -> int:
@@ -66,6 +70,8 @@ class Mixture:
             w = mode.weight
             if not (isinstance(w, (int, float, np.floating, np.integer)) and math.isfinite(w) and w >= 0):
                 raise ValueError(f"modes[{i}].weight must be a finite number >= 0, got {w!r}")
+            if not (isinstance(mode.share, (int, float, np.floating)) and 0.0 < mode.share <= 1.0):
+                raise ValueError(f"modes[{i}].share must lie in (0, 1], got {mode.share!r}")
             check_spreads(mode.beliefs, f"modes[{i}].beliefs")
         total = math.fsum(m.weight for m in modes)
         if abs(total - 1.0) > WEIGHT_TOLERANCE:
@@ -104,10 +110,11 @@ class Mixture:
         return [(m.weight, m.at(n)) for m in self.modes]
 
     def above(self, threshold: float) -> tuple[Mode, ...]:
-        """The modes of weight at least ``threshold`` (in [0, 1]), or the most likely one when none is."""
+        """The modes whose hypothesis weighs at least ``threshold`` (in [0, 1]; ``weight / share``:
+        every piece of a likely route), or the most likely one when none does."""
         if not (0.0 <= threshold <= 1.0):
             raise ValueError(f"the mode threshold must lie in [0, 1], got {threshold!r}")
-        kept = tuple(m for m in self.modes if m.weight >= threshold)
+        kept = tuple(m for m in self.modes if m.weight >= threshold * m.share)
         return kept or (self.most_likely(),)
 
     def sample_mode(self, uniform: float) -> Mode:

@@ -32,6 +32,8 @@ class Predictor(ABC):
     """Maps a road user's measurement to its belief over the horizon."""
 
     name: ClassVar[str]
+    max_modes: int = 3
+    """The most modes a mixture of this predictor has (an agent sizes its mode slots by it)."""
 
     @abstractmethod
     def predict(self, measurement: Any, steps: int) -> Mixture:
@@ -55,6 +57,7 @@ class ConstantPredictor(Predictor):
     axes (``frame`` 0)."""
 
     name = "constant"
+    max_modes = 1
 
     def __init__(self, scenario: Scenario, uncertainty: Uncertainty | None = None) -> None:
         if not isinstance(scenario, Scenario):

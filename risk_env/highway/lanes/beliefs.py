@@ -78,6 +78,7 @@ def mode_beliefs(
     dt: float,
     a_max: float,
     lateral_time: float,
+    piece: tuple[int, int] = (0, 1),
 ) -> Belief:
     """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
 
@@ -85,7 +86,9 @@ def mode_beliefs(
     [m] and speeds [m/s] of the mode's routes (same arc length along their shared lanes), ``share``:
     their weights within the mode ``(R,)``; ``start``, ``offset``: the road user's arc length and
     lateral offset [m] now, ``speed`` its speed [m/s]; ``dt`` [s]; ``a_max`` [m/s^2] of full
-    braking and acceleration; ``lateral_time`` [s] with which the offset decays."""
+    braking and acceleration; ``lateral_time`` [s] with which the offset decays. ``piece`` ``(j, P)``:
+    the j-th of P equal bands of the reachable stretch along the route (from full braking to full
+    acceleration), its mean at the band's middle (P = 1: the whole stretch around the mean)."""
     steps = s.shape[1] - 1
     t = np.arange(steps + 1) * dt
     s_mean, v_mean = share @ s, share @ v
@@ -94,6 +97,11 @@ def mode_beliefs(
     low, high = reach(speed, limit, steps, dt, a_max)
     s_lo = np.minimum(s.min(axis=0), start + low) - spread.margin_along
     s_hi = np.maximum(s.max(axis=0), start + high) + spread.margin_along
+    j, pieces = piece
+    if pieces > 1:
+        band = (s_hi - s_lo) / pieces
+        s_lo, s_hi = s_lo + j * band, s_lo + (j + 1) * band
+        s_mean = (s_lo + s_hi) / 2
     lateral = offset * np.exp(-t / lateral_time)
     mean = route.position(s_mean, lateral)
     count = max(int(math.ceil(float((s_hi - s_lo).max()) / BOX_SPACING)), 1) + 1

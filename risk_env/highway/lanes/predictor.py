@@ -110,6 +110,7 @@ class LanePredictor(Predictor):
         lookahead: float = 150.0,
         off_road: float = 2.0,
         fallback: Predictor | None = None,
+        pieces: int = 1,
     ) -> None:
         if not (hasattr(road_network, "graph") and hasattr(road_network, "get_closest_lane_index")):
             raise TypeError(
@@ -131,6 +132,9 @@ class LanePredictor(Predictor):
                 raise TypeError(f"{name} must be a {kind.__name__} or None, got {checks.describe(value)}")
         self.lookahead = checks.positive("lookahead", lookahead)
         self.off_road = checks.positive("off_road", off_road)
+        self.pieces = checks.integer("pieces", pieces, minimum=1)
+        """P: each route's reachable stretch is split into P bands, one mode each."""
+        self.max_modes = len(ORDER) * self.pieces
         if fallback is None:
             scenario = Scenario.preset("low", dt=self.dt, velocity_bounds0=(-SPEED_BOUND, SPEED_BOUND))
             fallback = ConstantPredictor(scenario)
@@ -318,20 +322,24 @@ class LanePredictor(Predictor):
             total = float(w.sum())
             lead = group[int(np.argmax(w))]
             share = w / total if total > 0 else np.full(len(group), 1.0 / len(group))
-            beliefs = mode_beliefs(
-                self.spread,
-                hyp.routes[lead],
-                s[group],
-                v[group],
-                share,
-                float(hyp.starts[lead]),
-                float(hyp.offsets[lead]),
-                float(row[3]),
-                self.dt,
-                self.traffic.max_acceleration,
-                self.traffic.lateral_time,
-            )
             routes = tuple((hyp.routes[k].label(), float(hyp.weights[k])) for k in group)
-            modes.append((total, beliefs, label, routes))
+            for j in range(self.pieces):
+                beliefs = mode_beliefs(
+                    self.spread,
+                    hyp.routes[lead],
+                    s[group],
+                    v[group],
+                    share,
+                    float(hyp.starts[lead]),
+                    float(hyp.offsets[lead]),
+                    float(row[3]),
+                    self.dt,
+                    self.traffic.max_acceleration,
+                    self.traffic.lateral_time,
+                    (j, self.pieces),
+                )
+                name = label if self.pieces == 1 else f"{label}#{j + 1}/{self.pieces}"
+                modes.append((total / self.pieces, beliefs, name, routes))
         norm = sum(m[0] for m in modes)
-        return Mixture(tuple(LaneMode(w / norm, b, label, routes=r) for w, b, label, r in modes))
+        share = 1.0 / self.pieces
+        return Mixture(tuple(LaneMode(w / norm, b, label, share, routes=r) for w, b, label, r in modes))
