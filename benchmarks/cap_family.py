@@ -1,11 +1,11 @@
-"""The stress benchmark's ``--family cap``: does every solver call stay within the step's cap?
+r"""The stress benchmark's ``--family cap``: does every solver call stay within the step's cap?
 
     python -m benchmarks.stress --family cap --scenes 500 --workers 2 --out docs/results/cap
 
-Setting i pairs the stress scene i (:func:`benchmarks.scenes.make_scenes`) with an agent drawn
+Setting $i$ pairs the stress scene $i$ (:func:`benchmarks.scenes.make_scenes`) with an agent drawn
 from ``default_rng([seed, i, 7])``: the RMPC (a fifth of the settings), the exact SMPC (three
 fifths) or the Monte Carlo SMPC (a fifth); one of the four severities; for an SMPC a tolerance
-epsilon in {0, 0.05, 1} scales or none (``math.inf``, with a budget), an episode budget B of none,
+$\epsilon$ in {0, 0.05, 1} scales or none (``math.inf``, with a budget), an episode budget $B$ of none,
 0 or {1e-5 (the smallest allowed), 5e-5, 1e-3, 0.1, 1, 1e6 (the largest)} scales and a risk weight
 of none or {1e-3, 1, 1e3, 1e6 (the largest)} per scale (the scale: the severity's typical
 magnitude, 1000 J for the paper's; 5e-5 scales = 0.05 J, 1e-3 = 1 J, 0.1 = 100 J there, the
@@ -45,9 +45,9 @@ GROUPS: dict[str, tuple[str, str]] = {
 """Agent groups of the family -> (method, risk estimator)."""
 SEVERITIES = ("paper", "plastic", "probability", "injury")
 TOLERANCES = (0.0, 0.05, 1.0, math.inf)
-"""epsilon in scales (inf: no per-step bound; drawn only with a budget)."""
+r"""$\epsilon$ in scales (inf: no per-step bound; drawn only with a budget)."""
 BUDGETS = (None, 0.0, 1e-5, 5e-5, 1e-3, 0.1, 1.0, 1e6)
-"""B in scales (None: no budget)."""
+"""$B$ in scales (None: no budget)."""
 ALLOCATIONS = ("share", "horizon")
 """How a drawn budget is spent (``"horizon"``: the NLP's budget row and accumulator)."""
 WEIGHTS = (None, 1e-3, 1.0, 1e3, 1e6)

@@ -1,17 +1,17 @@
-"""The agents of the intersection commands: what each name means there, its label, its driver.
+r"""The agents of the intersection commands: what each name means there, its label, its driver.
 
 Names follow :mod:`benchmarks.agent_names`; at the intersection they read:
 
 - ``rmpc[:RISK]``: :class:`agents.RMPC`, robust against every predicted mode of weight at least
   ``--mode-threshold`` of every planned-for vehicle;
 - ``smpc[:RISK]`` (no further part): :class:`agents.SMPC` with the command's ``--severity`` and an
-  episode risk budget B = ``--budget``, no per-step bound (``risk_tolerance=inf``: the budget
-  alone); ``smpc[:RISK]:budget=B`` the same with budget B;
-- ``smpc[:RISK]:SEVERITY:TOLERANCE``: the per-step bound epsilon alone (no budget), e.g.
+  episode risk budget $B$ = ``--budget``, no per-step bound (``risk_tolerance=inf``: the budget
+  alone); ``smpc[:RISK]:budget=B`` the same with budget $B$;
+- ``smpc[:RISK]:SEVERITY:TOLERANCE``: the per-step bound $\epsilon$ alone (no budget), e.g.
   ``smpc:probability:0.01``; ``...:budget=B`` adds a budget to it;
 - ``idm``: :class:`risk_env.highway.IDMEgo`, highway-env's own driver on the ego's route.
 
-A budget is finite and >= 0 and, in the probability severity, at most 1 (a chance per episode).
+A budget is finite and $\ge 0$ and, in the probability severity, at most 1 (a chance per episode).
 """
 
 from __future__ import annotations
@@ -44,9 +44,9 @@ class HighwayAgent:
     severity: str = ""
     """The SMPC's severity (the command's ``--severity`` unless named)."""
     tolerance: float = math.inf
-    """The SMPC's per-step bound epsilon [the severity's unit]; ``inf``: none."""
+    r"""The SMPC's per-step bound $\epsilon$ [the severity's unit]; ``inf``: none."""
     budget: float | None = None
-    """The SMPC's episode risk budget B [the severity's unit]; None: none."""
+    """The SMPC's episode risk budget $B$ [the severity's unit]; None: none."""
 
     @property
     def name(self) -> str:
@@ -83,7 +83,7 @@ class HighwayAgent:
 
 
 def check_budget(value: float, severity: str, what: str = "budget") -> float:
-    """``value`` as an episode risk budget in ``severity``'s unit: finite, >= 0 and, for the
+    r"""``value`` as an episode risk budget in ``severity``'s unit: finite, $\ge 0$ and, for the
     probability severity, at most 1; else ``ValueError`` naming ``what``."""
     value = float(value)
     if not (math.isfinite(value) and value >= 0.0):

@@ -132,8 +132,8 @@ def _value(rows: list[dict[str, Any]], predictor: str, phase: str, horizon: floa
 
 
 def targets(rows: list[dict[str, Any]]) -> list[str]:
-    """Each route-aware predictor against issue 19's targets, relative to ``constant`` (a Markdown
-    table; empty without ``constant``)."""
+    """Each route-aware predictor against the bounds the benchmark checks, relative to ``constant``
+    (a Markdown table; empty without ``constant``)."""
     horizons = sorted({r["horizon_s"] for r in rows})
     if not horizons or _value(rows, "constant", "all", horizons[-1], "ade_m") is None:
         return []

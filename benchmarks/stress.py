@@ -1,11 +1,11 @@
-"""The standing reliability benchmark: every MPC agent over a seeded family of random scenes.
+r"""The standing reliability benchmark: every MPC agent over a seeded family of random scenes.
 
     python -m benchmarks.stress            # 200 scenes x rmpc, smpc:paper:0, smpc:paper:1000
     python -m benchmarks.stress --scenes 20 --agents rmpc --out results/stress20
     python -m benchmarks.stress --family cap --scenes 500 --workers 2 --out docs/results/cap
 
 The scenes (:mod:`benchmarks.scenes`): starts near the path; objects close by, crossing the path,
-or never crossing it; every uncertainty level of Table I and an enlarged growth; v_ref from 1 to
+or never crossing it; every uncertainty level of Table I and an enlarged growth; $v_{ref}$ from 1 to
 8 m/s; the paper's and sampled object motion. Per agent it reports collisions, split into
 avoidable (some rate-limited open-loop manoeuvre from the start would have kept clear of the
 object's true motion for the whole episode) and unavoidable; how often each fallback level of
@@ -14,7 +14,7 @@ manoeuvre), as a share of all steps; solver calls that failed; and the step time
 ``predict``) at p50 / p95 / p99 / max.
 
 Agents are named as in every command (:mod:`benchmarks.agent_names`); an SMPC without a tolerance
-runs at epsilon = 0 in the paper's severity (J). Writes ``stress.csv`` (one row per agent and
+runs at $\epsilon = 0$ in the paper's severity (J). Writes ``stress.csv`` (one row per agent and
 scene), ``stress_summary.csv`` and ``stress.md`` (the command that made them in its header) to
 ``--out``, as one output set (:mod:`benchmarks.output`; ``--resume`` goes on after an interruption).
 
@@ -49,7 +49,7 @@ FILES = ("stress.csv", "stress_summary.csv", "stress.md")
 
 
 def agent(name: str) -> AgentName:
-    """The agent ``name`` (an SMPC without a tolerance: epsilon = 0, the paper's severity)."""
+    r"""The agent ``name`` (an SMPC without a tolerance: $\epsilon = 0$, the paper's severity)."""
     return parse_agent(name, ("rmpc", "smpc")).with_defaults("paper", 0.0)
 
 
@@ -168,8 +168,8 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def infeasible_steps(scene: Scene, record: Any, epsilon: float, agent: Any) -> int:
-    """Fallback steps of the episode certified infeasible (:func:`scenes.infeasible_step`, for a
-    risk row that is the box clearance: epsilon = 0)."""
+    r"""Fallback steps of the episode certified infeasible (:func:`scenes.infeasible_step`, for a
+    risk row that is the box clearance: $\epsilon = 0$)."""
     sc = scene.scenario(epsilon)
     count = 0
     for k in np.flatnonzero(record.fallback):

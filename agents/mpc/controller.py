@@ -46,11 +46,11 @@ RUNGS = 6
 """Rungs of the solver ladder per NLP variant: 1, 1/2, ..., 1/32 of the iteration (fatrop: 150 down
 to 4 by default) or time (IPOPT) limit."""
 SOFT_PENALTY = 1e4
-"""Default rho of the soft problem's exact L1 penalty [cost per margin unit]."""
+r"""Default $\rho$ of the soft problem's exact L1 penalty [cost per margin unit]."""
 
 
 class PathFollowingMPC(RiskForm):
-    """Path-following MPC with a risk constraint; the subclasses say which (:class:`agents.RMPC`,
+    r"""Path-following MPC with a risk constraint; the subclasses say which (:class:`agents.RMPC`,
     :class:`agents.SMPC`). The problem is in :mod:`agents.mpc.nlp.ocp`, its solver in
     :mod:`agents.mpc.nlp.solver`.
 
@@ -61,8 +61,8 @@ class PathFollowingMPC(RiskForm):
     where (b) or (c) did.
 
     Args:
-        scenario: the case study; its ``risk_tolerance`` is epsilon unless overridden.
-        risk_tolerance: epsilon [units of the severity], >= 0; overrides the scenario's.
+        scenario: the case study; its ``risk_tolerance`` is $\epsilon$ unless overridden.
+        risk_tolerance: $\epsilon$ [units of the severity], $\ge 0$; overrides the scenario's.
         solver: one of :data:`SOLVERS`.
         stage_cost: one of :data:`STAGE_COSTS` (see :mod:`agents.mpc.nlp.ocp`).
         jit: run the solver on compiled code (see "Compiled solvers" in :mod:`agents.mpc.nlp.solver`); falls
@@ -79,10 +79,10 @@ class PathFollowingMPC(RiskForm):
             ``$RISKMPC_JIT_CACHE`` or ``~/.cache/riskcrossing/jit``.
         tol, max_iter: solver tolerance and iteration limit.
         warm_start: start from the shifted previous solution (IPOPT: with its multipliers).
-        backoff: the risk rows ask ``margin_n >= backoff`` (margin units: metres of clearance, or
-            risk over the severity's scale), so a converged plan stays a hair off the boundary where
-            the worst-case risk's hard indicator jumps, and float32 observations cannot put the
-            applied step on its wrong side.
+        backoff: the risk rows ask $\mathrm{margin}_n \ge \mathrm{backoff}$ (margin units: metres of
+            clearance, or risk over the severity's scale), so a converged plan stays a hair off the
+            boundary where the worst-case risk's hard indicator jumps, and float32 observations
+            cannot put the applied step on its wrong side.
         cold_starts: how many initial-guess rollouts (best first) a level may try from cold: the
             first step of an episode solves the hard problem from each of them and keeps the plan
             of least cost (the problem is not convex: going round the object on either side,
@@ -90,22 +90,22 @@ class PathFollowingMPC(RiskForm):
             the shifted plan.
         max_solve_time: the wall-time cap of one step [s] (None: 20 % of the sample time;
             ``math.inf``: no cap, one solver per NLP).
-        soft_penalty: rho of the soft problem's penalty ``rho * sum_n s_n`` [cost per margin unit];
+        soft_penalty: $\rho$ of the soft problem's penalty $\rho \sum_n s_n$ [cost per margin unit];
             it must exceed the risk rows' multipliers for the penalty to be exact.
         solver_options: extra nlpsol options; ``{"ipopt": {...}}`` / ``{"fatrop": {...}}`` update
             the plugin's own options.
         seed: seed of the agent's generator (Monte Carlo draws).
-        object_slots: K, the object slots of the observations it reads (None: the scenario's
-            number of objects; match the env's ``object_slots``). One solver with K slots plans
-            against every present object (:mod:`agents.mpc.objects`); slot k takes object k's radius,
+        object_slots: $K$, the object slots of the observations it reads (None: the scenario's
+            number of objects; match the env's ``object_slots``). One solver with $K$ slots plans
+            against every present object (:mod:`agents.mpc.objects`); slot $k$ takes object $k$'s radius,
             mass and uncertainty, slots beyond the scenario's objects the last object's. An
             observation with another slot count raises ``ValueError`` naming both.
         predictor: the objects' prediction: ``None`` or ``"constant"`` (the paper's, made inside the
             NLP from each slot's measurement) or any :class:`risk_env.prediction.Predictor`,
             whose modes (likeliest first) fill ``modes`` rows per object slot as solver
             parameters: one built solver serves every scene (:class:`agents.mpc.objects.Slots`).
-        modes: M, the mode slots per object (default 3 with a predictor, 1 without).
-        mode_threshold: w_min in [0, 1]: the RMPC plans against every mode of at least this weight
+        modes: $M$, the mode slots per object (default 3 with a predictor, 1 without).
+        mode_threshold: $w_{min}$ in $[0, 1]$: the RMPC plans against every mode of at least this weight
             (the likeliest alone when none is); the SMPC against all, each weighted.
     """
 
@@ -115,7 +115,7 @@ class PathFollowingMPC(RiskForm):
     """Whether the risk is an expectation, summed over a mixture's modes with their weights (the
     SMPC); else every mode of weight at least ``mode_threshold`` is a row of its own (the RMPC)."""
     ZERO_TOLERANCE_VARIANT: ClassVar[bool] = False
-    """Whether the subclass has an exact, cheaper form at epsilon = 0 (``_margin(..., zero=True)``)."""
+    r"""Whether the subclass has an exact, cheaper form at $\epsilon = 0$ (``_margin(..., zero=True)``)."""
 
     def __init__(
         self,
@@ -159,7 +159,7 @@ class PathFollowingMPC(RiskForm):
         chosen = None if predictor in (None, "constant") else make_predictor(predictor, scenario)
         self._slots = Slots(scenario, self.slots, chosen, modes)
         self.mode_threshold = check_threshold(mode_threshold)
-        """w_min: the RMPC plans against every mode of at least this weight (the SMPC: all)."""
+        """$w_{min}$: the RMPC plans against every mode of at least this weight (the SMPC: all)."""
         self._numbers = self._slots.numbers
         scenarios = [self._slots.scenario_of(row) for row in range(self._slots.rows)]
         self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in scenarios)
@@ -204,7 +204,7 @@ class PathFollowingMPC(RiskForm):
     # ------------------------------------------------------------------ public API
     @property
     def risk_tolerance(self) -> float:
-        """epsilon [units of the severity]; a solver parameter, so it may change between steps."""
+        r"""$\epsilon$ [units of the severity]; a solver parameter, so it may change between steps."""
         return self._epsilon
 
     @risk_tolerance.setter
@@ -247,7 +247,7 @@ class PathFollowingMPC(RiskForm):
         episode_start: Any = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, None]:
-        """SB3's predictor protocol: float32 action(s) (v [m/s], omega [rad/s]) and no state.
+        r"""SB3's predictor protocol: float32 action(s) ($v$ [m/s], $\omega$ [rad/s]) and no state.
 
         ``observation``: one ``(10 + 6 K,)`` (K: :attr:`slots`) or a batch ``(B, 10 + 6 K)``,
         each solved in turn with its own warm start (by batch index); the plan respects every
@@ -266,8 +266,8 @@ class PathFollowingMPC(RiskForm):
     def _risk_numpy(
         self, ego: np.ndarray, futures: list[Belief | None], data: np.ndarray, weights: Any = None
     ) -> np.ndarray:
-        """Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present rows (``futures[k]``
-        not None) of their risks at n = 1..N, each times its mode's weight where the risk is an
+        r"""Risk ``(N,)`` of ego states ``(N, 4)``: the sum over the present rows (``futures[k]``
+        not None) of their risks at $n = 1, \dots, N$, each times its mode's weight where the risk is an
         expectation (:attr:`WEIGHTED`); zeros when no object is present."""
         rows = data.shape[1] // len(futures) if data.size else 0
         terms = [
@@ -341,8 +341,8 @@ class PathFollowingMPC(RiskForm):
         return result.report
 
     def _context(self, data: StepInput | None = None) -> StepContext:
-        """What a step uses that the controller owns (its risk with the rows' weights and its
-        epsilon: ``data``'s)."""
+        r"""What a step uses that the controller owns (its risk with the rows' weights and its
+        $\epsilon$: ``data``'s)."""
         weights = None if data is None else data.weights
         epsilon = self._epsilon if data is None else data.epsilon
         rows = self._slots.rows if data is None or data.rows is None else data.rows
@@ -364,8 +364,8 @@ class PathFollowingMPC(RiskForm):
         )
 
     def _measure(self, index: int, obs_vec: np.ndarray) -> StepInput:
-        """The step's data from the observation: the memory (dropped for a new episode), x_0, each
-        present slot's beliefs at n = 1..N, the active slots, the NLP variant, the risk data and
+        r"""The step's data from the observation: the memory (dropped for a new episode), $x_0$, each
+        present slot's beliefs at $n = 1, \dots, N$, the active slots, the NLP variant, the risk data and
         the solver parameters."""
         o = ob.split(obs_vec, slots=self.slots)
         memory = self._memory.get(index)

@@ -1,13 +1,13 @@
-"""The MPC's last resort and its safety clip: a family of rate-limited manoeuvres, the choice of the
+r"""The MPC's last resort and its safety clip: a family of rate-limited manoeuvres, the choice of the
 safest one, and the clip that keeps every applied action within the input bounds and rate limits.
 
 The family (:data:`MANOEUVRES`): each of four speed targets (brake to 0, hold the current speed,
-accelerate to v_max, reverse to v_min) with each of three turn targets (straight, full left, full
+accelerate to $v_{max}$, reverse to $v_{min}$) with each of three turn targets (straight, full left, full
 right), every target approached as fast as the rate limits allow. :func:`safest` ranks them by
-the agent's own risk first (the longer the predicted risk stays within epsilon, the safer), then
+the agent's own risk first (the longer the predicted risk stays within $\epsilon$, the safer), then
 by the worst-case clearance (the distance from the ego disc to the object's truncation box) at the
-first step where the risk exceeds epsilon (the less it is violated, the safer), then by the
-smallest clearance over the horizon n = 1..N. So the MPC never brakes blindly: braking is chosen
+first step where the risk exceeds $\epsilon$ (the less it is violated, the safer), then by the
+smallest clearance over the horizon $n = 1, \dots, N$. So the MPC never brakes blindly: braking is chosen
 only when no other manoeuvre keeps clear of the object longer, or by more.
 """
 
@@ -25,7 +25,7 @@ MANOEUVRES: tuple[str, ...] = tuple(f"{s}_{t}" if t else s for s in SPEEDS for t
 
 
 def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) -> np.ndarray:
-    """``action`` (v [m/s], omega [rad/s]) clipped into the bounds and the rate limits around the
+    r"""``action`` ($v$ [m/s], $\omega$ [rad/s]) clipped into the bounds and the rate limits around the
     last applied input ``last`` (2,), with a margin so that float32 rounding steps over no limit."""
     ego, dt = scenario.ego, scenario.dt
     shrink = 1.0 - 1e-6
@@ -36,7 +36,7 @@ def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) ->
 
 
 def manoeuvres(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
-    """The family's inputs ``(N, NU)`` (v [m/s], omega [rad/s], u2 = v) from the state ``x0``
+    r"""The family's inputs ``(N, NU)`` ($v$ [m/s], $\omega$ [rad/s], $u_2 = v$) from the state ``x0``
     ``(NX,)`` whose last applied input is ``x0[4:6]``, each within the bounds and rate limits."""
     ego, dt, N = scenario.ego, scenario.dt, scenario.horizon
     v_lim, w_lim = (ego.v_min, ego.v_max), (-ego.omega_max, ego.omega_max)
@@ -53,9 +53,9 @@ def manoeuvres(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def safest(risk: np.ndarray, clearance: np.ndarray, epsilon: float) -> int:
-    """Index of the safest manoeuvre: risk ``(M, N)`` by the agent's own estimator and worst-case
-    clearance ``(M, N)`` [m] at the states n = 1..N. Ranked by the first step whose risk exceeds
-    epsilon (later is safer; never is safest), then by the clearance at that step, then by the
+    r"""Index of the safest manoeuvre: risk ``(M, N)`` by the agent's own estimator and worst-case
+    clearance ``(M, N)`` [m] at the states $n = 1, \dots, N$. Ranked by the first step whose risk exceeds
+    $\epsilon$ (later is safer; never is safest), then by the clearance at that step, then by the
     smallest clearance over n (larger is safer); ties go to the earlier manoeuvre of the family."""
     risk, clearance = np.asarray(risk, float), np.asarray(clearance, float)
     if risk.shape != clearance.shape or risk.ndim != 2 or risk.shape[0] == 0:

@@ -28,8 +28,8 @@ def pack(problem: Problem, states: np.ndarray, inputs: np.ndarray) -> np.ndarray
 
 
 def fill_accumulators(problem: Problem, w: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """``w`` with the budget's accumulators c_n = R_1 + ... + R_{n-1} of its plan at parameters ``p``
-    (a no-op without a budget): with c = 0 the accumulator rows are -R_n."""
+    r"""``w`` with the budget's accumulators $c_n = \nu (R_1 + \dots + R_{n-1})$ of its plan at
+    parameters ``p`` (a no-op without a budget): with $c = 0$ the accumulator rows are $-\nu R_n$."""
     if not problem.acc_index.size:
         return w
     w = w.copy()

@@ -33,8 +33,8 @@ class RiskForm:
     def _margin(
         self, ego: ca.SX, beliefs: list[Belief], epsilon: ca.SX, data: ca.SX, numbers: ca.SX, zero: bool
     ) -> ca.SX:
-        """Symbolic rows of one stage (:data:`agents.mpc.nlp.ocp.Margin`), each >= 0 iff the risk bound
-        holds at this step for every active slot; ``zero``: the form for epsilon = 0 (only with
+        r"""Symbolic rows of one stage (:data:`agents.mpc.nlp.ocp.Margin`), each $\ge 0$ iff the risk bound
+        holds at this step for every active slot; ``zero``: the form for $\epsilon = 0$ (only with
         :attr:`ZERO_TOLERANCE_VARIANT`)."""
         raise NotImplementedError
 
@@ -47,7 +47,7 @@ class RiskForm:
         return None
 
     def _step_epsilon(self, index: int, new_episode: bool) -> float:
-        """epsilon of batch entry ``index``'s step (``new_episode``: its memory was dropped): the
+        r"""$\epsilon$ of batch entry ``index``'s step (``new_episode``: its memory was dropped): the
         agent's, unless a budget allocates it step by step (:class:`agents.SMPC`)."""
         return self._epsilon
 
@@ -57,7 +57,7 @@ class RiskForm:
         return np.zeros((self.horizon, 0, 0))
 
     def _slot_risk(self, slot: int, ego: np.ndarray, belief: Belief, data: np.ndarray) -> np.ndarray:
-        """Slot ``slot``'s risk ``(N,)`` of ego states ``(N, 4)`` against its beliefs at n = 1..N
+        r"""Slot ``slot``'s risk ``(N,)`` of ego states ``(N, 4)`` against its beliefs at $n = 1, \dots, N$
         (``data``: its block ``(N, J, 3)``)."""
         raise NotImplementedError
 

@@ -1,4 +1,4 @@
-"""What an MPC step measures from an observation (:mod:`risk_env.observation`): the state x_0,
+"""What an MPC step measures from an observation (:mod:`risk_env.observation`): the state $x_0$,
 each present slot's beliefs over the horizon, which slots could matter within the horizon, and
 whether the observation continues the episode that the controller remembers."""
 
@@ -21,7 +21,8 @@ FREE_MARGIN = 0.5
 
 
 def measured_state(scenario: Scenario, o: ob.Observation) -> np.ndarray:
-    """x_0 ``(NX,)``: the pose with theta unwrapped near theta_P(lambda_k), lambda_k, the last input."""
+    r"""$x_0$ ``(NX,)``: the pose with $\theta$ unwrapped near $\theta_P(\lambda_k)$, $\lambda_k$, the
+    last input."""
     lam = o.progress
     theta_p = float(point(scenario.path, lam)[2])
     theta = theta_p + float(NUMPY.wrap_angle(o.ego_pose[2] - theta_p))
@@ -29,7 +30,7 @@ def measured_state(scenario: Scenario, o: ob.Observation) -> np.ndarray:
 
 
 def reach(scenario: Scenario, v_last: float) -> np.ndarray:
-    """Upper bound ``(N,)`` [m] on the distance from the current position to the state n = 1..N,
+    r"""Upper bound ``(N,)`` [m] on the distance from the current position to the state $n = 1, \dots, N$,
     from the last speed ``v_last`` [m/s] under the speed bounds and the acceleration limit."""
     ego, dt = scenario.ego, scenario.dt
     cap = max(abs(ego.v_min), abs(ego.v_max))
@@ -39,7 +40,7 @@ def reach(scenario: Scenario, v_last: float) -> np.ndarray:
 
 def risk_possible(scenario: Scenario, x0: np.ndarray, future: Belief, radius: float) -> bool:
     """Whether some step's risk of an object with beliefs ``future`` (and collision distance
-    ``radius`` [m]) could be nonzero where the ego can reach from x_0 (else its slot is inactive;
+    ``radius`` [m]) could be nonzero where the ego can reach from $x_0$ (else its slot is inactive;
     no active slot: the ``"free"`` variant)."""
     along, across = to_frame(x0[0] - future.x, x0[1] - future.y, future.frame)  # the box's frame
     distance = signed_box_distance(along, across, future.half_x, future.half_y)

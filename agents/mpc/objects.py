@@ -1,15 +1,15 @@
-"""The MPC's object slots: each slot's estimators (numeric and symbolic), the slots' risk rows
+r"""The MPC's object slots: each slot's estimators (numeric and symbolic), the slots' risk rows
 and the numbers a step hands the solver.
 
-An agent has K object slots, fixed at construction (``object_slots``; by default the scenario's
-number of objects). Slot k takes object k's radius, mass and uncertainty; slots beyond the
+An agent has $K$ object slots, fixed at construction (``object_slots``; by default the scenario's
+number of objects). Slot $k$ takes object $k$'s radius, mass and uncertainty; slots beyond the
 scenario's objects take the last object's (:func:`agents.mpc.nlp.parameters.slot_numbers`). In the
 solver these
-numbers are parameters, so one built solver serves every scene with up to K objects.
+numbers are parameters, so one built solver serves every scene with up to $K$ objects.
 
 - :func:`symbolic` makes an estimator whose collision distance and object mass are CasADi
   symbols (the solver's parameters), every other number its own.
-- :func:`combine` adds the slots' numeric risks of the present objects: R = sum_k R_k, the
+- :func:`combine` adds the slots' numeric risks of the present objects: $R = \sum_k R_k$, the
   expected total harm (:mod:`risk_env.risk.total_risk`).
 """
 
@@ -58,7 +58,7 @@ def slot_rows(data: ca.SX, slot: int, rows: int) -> ca.SX:
 
 
 def combine(terms: list[np.ndarray]) -> np.ndarray:
-    """R = sum over the present slots' risks ``(N,)`` (left to right: one term is itself); zeros
+    r"""$R = \sum$ over the present slots' risks ``(N,)`` (left to right: one term is itself); zeros
     when none is present."""
     if not terms:
         return np.zeros(0)
@@ -69,7 +69,7 @@ def combine(terms: list[np.ndarray]) -> np.ndarray:
 
 
 def check_slots(value: Any, scenario: Scenario) -> int:
-    """``object_slots`` checked: an integer >= 1 (None: the scenario's number of objects)."""
+    r"""``object_slots`` checked: an integer $\ge 1$ (None: the scenario's number of objects)."""
     if value is None:
         return len(scenario.objects)
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -78,13 +78,13 @@ def check_slots(value: Any, scenario: Scenario) -> int:
 
 
 class Slots:
-    """The planning slots: K object slots (the observation's), each with M mode slots, so the
+    r"""The planning slots: K object slots (the observation's), each with M mode slots, so the
     NLP has K M rows of beliefs; slot (k, m) is row ``k M + m``.
 
     Without a predictor (the paper's prediction) M = 1 and each row's beliefs are the
     constant-input prediction from the slot's measurement, made inside the NLP. With a
     ``predictor`` (:class:`~risk_env.prediction.predictors.Predictor`) every row's beliefs at
-    n = 1..N and its weight w are solver parameters ("given"): object k's modes, likeliest first,
+    $n = 1, \dots, N$ and its weight w are solver parameters ("given"): object k's modes, likeliest first,
     fill its M rows (a mixture of more than M modes raises ``ValueError``), absent ones weigh 0.
     """
 
@@ -119,7 +119,7 @@ class Slots:
         return slot_scenario(self.scenario, row // self.modes)
 
     def beliefs(self, problem: Any, o: Any) -> tuple[list[Belief | None], np.ndarray, np.ndarray]:
-        """Each row's beliefs at n = 1..N (None where absent), its weight ``(K M,)`` and its
+        r"""Each row's beliefs at $n = 1, \dots, N$ (None where absent), its weight ``(K M,)`` and its
         hypothesis's weight ``(K M,)`` (weight / share, :attr:`Mode.share
         <risk_env.prediction.mixture.Mode.share>`: what a mode threshold compares), for the split
         observation ``o``: by the built ``problem``'s own prediction, or the predictor's."""
@@ -197,7 +197,7 @@ def _count(name: str, value: Any) -> int:
 
 
 MODE_THRESHOLD = 0.05
-"""w_min by default: the RMPC plans against every mode whose weight is at least this."""
+"""$w_{min}$ by default: the RMPC plans against every mode whose weight is at least this."""
 
 
 def check_threshold(value: Any) -> float:

@@ -1,4 +1,5 @@
-"""The robust MPC (paper Sec. IV): the worst-case risk constraint R_wc,n|k <= epsilon, n = 1..N."""
+r"""The robust MPC (paper Sec. IV): the worst-case risk constraint $R_{wc,n|k} \le \epsilon$,
+$n = 1, \dots, N$."""
 
 from __future__ import annotations
 
@@ -16,17 +17,18 @@ from risk_env.scenario.scenario import Scenario
 
 
 class RMPC(PathFollowingMPC):
-    """Path-following MPC under the worst-case risk of every prediction step n = 1..N.
+    r"""Path-following MPC under the worst-case risk of every prediction step $n = 1, \dots, N$.
 
     ``risk="worst_case"`` (default) uses the exact box form of
-    :class:`risk_env.risk.estimators.WorstCaseRisk`: ``max(clearance, (epsilon - s_worst)/scale) >= 0`` with
-    clearance = signed distance from the ego centre to the object's truncation box minus
-    ``r_e + r_o``, one row per object slot and stage (every object's worst case excluded; an
-    inactive slot's row is lifted by :data:`agents.mpc.nlp.parameters.INACTIVE`); a
-    tolerance above the worst severity over the speed interval relaxes it (with the
-    paper's severity and a speed interval containing 0 that takes epsilon >= 6250 J, so the paper's
-    RMPC ignores epsilon). ``risk="grid"`` is the paper's L-point grid under-approximation
-    (L = ``grid_points`` or the scenario's). Both are piecewise smooth (``fmax``); IPOPT copes.
+    :class:`risk_env.risk.estimators.WorstCaseRisk`:
+    $\max(d - r, (\epsilon - s_{worst}) / \mathrm{scale}) \ge 0$ with the clearance $d - r$ the
+    signed distance $d$ from the ego centre to the object's truncation box minus $r = r_e + r_o$,
+    one row per object slot and stage (every object's worst case excluded; an inactive slot's row is
+    lifted by :data:`agents.mpc.nlp.parameters.INACTIVE`); a tolerance above the worst severity over
+    the speed interval relaxes it (with the paper's severity and a speed interval containing 0 that
+    takes $\epsilon \ge$ 6250 J, so the paper's RMPC ignores $\epsilon$). ``risk="grid"`` is the
+    paper's $L$-point grid under-approximation ($L$ = ``grid_points`` or the scenario's). Both are
+    piecewise smooth (``fmax``); IPOPT copes.
 
     See :class:`agents.mpc.controller.PathFollowingMPC` for the problem, the solver options and the fallback
     (the soft problem, then the safest rate-limited manoeuvre; counted in :attr:`failures`, never
@@ -75,5 +77,5 @@ class RMPC(PathFollowingMPC):
 
     def clearance(self, ego: np.ndarray, beliefs: Belief) -> np.ndarray:
         """Distance [m] from ego centres ``(N, 4)`` to the first slot's truncation boxes minus
-        r_e + r_o."""
+        $r_e + r_o$."""
         return self.estimator.distance(ego, beliefs) - self.estimator.radius

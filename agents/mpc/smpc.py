@@ -1,4 +1,5 @@
-"""The stochastic MPC (paper Sec. V): the expected-risk constraint R_n|k <= epsilon, n = 1..N."""
+r"""The stochastic MPC (paper Sec. V): the expected-risk constraint $R_{n|k} \le \epsilon$,
+$n = 1, \dots, N$."""
 
 from __future__ import annotations
 
@@ -21,17 +22,18 @@ from risk_env.risk.severity import make_severity
 from risk_env.scenario.scenario import Scenario
 
 CLEARANCE_SOFTNESS = 0.05
-"""Temperature [m] of the soft minimum over the Monte Carlo draws' distances (the clearance): below
-the nearest distance by at most ``CLEARANCE_SOFTNESS * log(J)`` (0.31 m for J = 500)."""
+r"""Temperature [m] of the soft minimum over the Monte Carlo draws' distances (the clearance): below
+the nearest distance by at most ``CLEARANCE_SOFTNESS`` $\cdot \log J$ (0.31 m for $J = 500$)."""
 
 
 class SMPC(PathFollowingMPC):
-    """Path-following MPC under the expected risk R = E[I_C s] of every prediction step n = 1..N.
+    r"""Path-following MPC under the expected risk $R = E[I_C s]$ of every prediction step
+    $n = 1, \dots, N$.
 
     ``risk="exact"`` (default): :class:`risk_env.risk.estimators.ExactRisk`, deterministic and smooth.
 
     ``risk="monte_carlo"``: the paper's estimator, :class:`risk_env.risk.estimators.MonteCarloRisk`, over
-    ``samples`` draws per step n (default: the scenario's J = 500), drawn once per solve from the
+    ``samples`` draws per step $n$ (default: the scenario's $J = 500$), drawn once per solve from the
     agent's own generator (``seed``; common random numbers across the solver's iterations,
     reproducible after :meth:`reset`) and passed as parameters. The solver sees the estimator's
     smoothed CasADi form (a logistic indicator of width ``bandwidth`` times the draws' spread, the
@@ -39,28 +41,29 @@ class SMPC(PathFollowingMPC):
     for the forms and their bias); ``smoothing`` [m] fixes the width instead. The reported risk
     re-evaluates the plan with the hard indicator on the same draws.
 
-    The exact risk's constraint is written ``max(clearance, (epsilon - R)/scale) >= backoff``, and
-    ``clearance >= backoff`` alone at epsilon = 0 (the core's ``"zero"`` variant). R there is
-    :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`: the env's quadrature cut at +-5 sigma (54 nodes,
-    not 66) with its bounded shortfall added back, never below the env's R and above it by at most
-    5.7e-7 E[s]; its derivatives are those of the integral (see
-    :func:`~risk_env.risk.estimators.disc_probability`), a third of the cost of differentiating the rule. The
-    clearance is the distance from the ego centre to where the object may be, minus ``r_e + r_o``:
-    to the truncation box for the exact risk; to the draws for Monte Carlo, as a smooth soft minimum
-    of the distances, below the nearest by at most :data:`CLEARANCE_SOFTNESS` ``* log(J)`` (0.31 m
-    for J = 500). R vanishes wherever the clearance is positive, so this is R <= epsilon; but R's
-    gradient vanishes with R, and R <= 0 has no interior, which stalls an interior-point solver,
-    while the clearance keeps a gradient (and a truncated Gaussian puts ~1e-20 of mass near a box
-    edge ten sigmas out: the unguarded exact constraint would let the plan into the box at epsilon =
-    0). So at epsilon = 0 the exact SMPC is the RMPC's box constraint, as it must be (P = 0 off the
-    box), and the Monte Carlo SMPC keeps off every draw (it differs from the RMPC by the tails its
-    draws miss). The Monte Carlo SMPC at epsilon > 0 asks ``(epsilon - R)/scale >= backoff`` alone:
-    its smoothed R is never exactly 0, so the constraint has an interior, and the clearance could
-    only matter for tolerances below the logistic's tails (a few J); it doubled the cost of an
-    evaluation.
+    The exact risk's constraint is written
+    $\max(d - r, (\epsilon - R) / \mathrm{scale}) \ge \mathrm{backoff}$, with $d - r$ the clearance, and
+    $d - r \ge \mathrm{backoff}$ alone at $\epsilon = 0$ (the core's ``"zero"`` variant). $R$ there is
+    :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`: the env's quadrature cut at $\pm 5 \sigma$
+    (54 nodes, not 66) with its bounded shortfall added back, never below the env's $R$ and above it by
+    at most 5.7e-7 $E[s]$; its derivatives are those of the integral (see
+    :func:`~risk_env.risk.estimators.disc_probability`), a third of the cost of differentiating the
+    rule. The clearance $d - r$ is the distance $d$ from the ego centre to where the object may be,
+    minus $r = r_e + r_o$: to the truncation box for the exact risk; to the draws for Monte Carlo, as a
+    smooth soft minimum of the distances, below the nearest by at most :data:`CLEARANCE_SOFTNESS`
+    $\cdot \log J$ (0.31 m for $J = 500$). $R$ vanishes wherever the clearance is positive, so this is
+    $R \le \epsilon$; but $R$'s gradient vanishes with $R$, and $R \le 0$ has no interior, which stalls
+    an interior-point solver, while the clearance keeps a gradient (and a truncated Gaussian puts ~1e-20
+    of mass near a box edge ten standard deviations out: the unguarded exact constraint would let the
+    plan into the box at $\epsilon = 0$). So at $\epsilon = 0$ the exact SMPC is the RMPC's box
+    constraint, as it must be ($P = 0$ off the box), and the Monte Carlo SMPC keeps off every draw (it
+    differs from the RMPC by the tails its draws miss). The Monte Carlo SMPC at $\epsilon > 0$ asks
+    $(\epsilon - R) / \mathrm{scale} \ge \mathrm{backoff}$ alone: its smoothed $R$ is never exactly 0,
+    so the constraint has an interior, and the clearance could only matter for tolerances below the
+    logistic's tails (a few J); it doubled the cost of an evaluation.
 
     Monte Carlo in the solver: with a fixed 0.05 m logistic the risk was a staircase of single
-    draws where they are sparse (500 draws with sigma = 6 m lie ~0.1 m apart near the disc edge),
+    draws where they are sparse (500 draws with $\sigma$ = 6 m lie ~0.1 m apart near the disc edge),
     and the paper's severity has a kink per draw in the ego speed, right where the SMPC puts it
     (kinetic energies matched): the solver cycled between kinks and failed on 2 of the paper's
     closed-loop steps. The spread-proportional width and the rounded severity halve the iterations
@@ -69,23 +72,22 @@ class SMPC(PathFollowingMPC):
     from the pilot's plan: about a third of the cost of three full cold solves. ``pilot_samples=None``
     solves the full problem from every rollout.
 
-    **Many objects** (K slots, :mod:`agents.mpc.objects`): one row per stage on the sum of the active
-    slots' risks, ``sum_k R_k <= epsilon`` (the expected total harm of the step), written
-    ``max(min_k clearance_k, (epsilon - sum_k R_k)/scale) >= backoff`` (each inactive slot's
-    clearance lifted by :data:`agents.mpc.nlp.parameters.INACTIVE`, its R times 0); at epsilon = 0 one
-    clearance
-    row per slot. With one slot these are the single-object rows exactly.
+    **Many objects** ($K$ slots, :mod:`agents.mpc.objects`): one row per stage on the sum of the
+    active slots' risks, $\sum_k R_k \le \epsilon$ (the expected total harm of the step), written
+    $\max(\min_k (d_k - r_k), (\epsilon - \sum_k R_k) / \mathrm{scale}) \ge \mathrm{backoff}$ (each
+    inactive slot's clearance lifted by :data:`agents.mpc.nlp.parameters.INACTIVE`, its $R$ times 0); at
+    $\epsilon = 0$ one clearance row per slot. With one slot these are the single-object rows exactly.
 
     **Episode risk budget and risk weight** (:mod:`agents.mpc.nlp.risk_budget`, where the guarantee and its
     assumptions are written out): ``risk_budget=B`` bounds the summed risk of an episode without a
-    fallback (``info["episode_risk"]``) by B, spent being the risk of the steps already taken
+    fallback (``info["episode_risk"]``) by $B$, spent being the risk of the steps already taken
     (:meth:`spent_risk`). ``budget_allocation="share"`` (default) lets each step's rows use
-    ``min(epsilon, alpha (B - spent))`` (``budget_share`` alpha, 0.5 by default): a step spends
-    where it buys progress, and what is left never runs out; ``"horizon"`` asks every plan for
-    spent + sum_n R_{n|k} <= B (its whole horizon's foreseen risk, a stricter allocation). With
+    $\min(\epsilon, \alpha (B - \mathrm{spent}))$ (``budget_share`` $\alpha$, 0.5 by default): a step
+    spends where it buys progress, and what is left never runs out; ``"horizon"`` asks every plan for
+    $\mathrm{spent} + \sum_n R_{n|k} \le B$ (its whole horizon's foreseen risk, a stricter allocation). With
     ``severity="probability"`` a bound on the chance of any collision in the episode, with
     ``"injury"`` on the expected serious injuries per episode. ``risk_tolerance=math.inf`` drops
-    the per-step bound (the budget alone). ``risk_weight=w`` adds ``w * sum_n R_{n|k}`` to the
+    the per-step bound (the budget alone). ``risk_weight=w`` adds $w \sum_n R_{n|k}$ to the
     objective, with or without either bound.
 
     The severity model is the scenario's (``scenario.severity``). See
@@ -115,13 +117,13 @@ class SMPC(PathFollowingMPC):
         severity = make_severity(scenario) if isinstance(scenario, Scenario) else None
         scale, unit = (severity.scale, severity.unit) if severity is not None else (None, "")
         self.risk_budget = rb.check_budget(risk_budget, scale=scale, unit=unit)
-        """B, the episode risk budget [the severity's unit] (None: none); fixed at construction."""
+        """$B$, the episode risk budget [the severity's unit] (None: none); fixed at construction."""
         self.budget_allocation = rb.check_allocation(budget_allocation)
         """How the budget is spent (:data:`agents.mpc.nlp.risk_budget.ALLOCATIONS`)."""
         self.budget_share = rb.check_share(budget_share)
-        """alpha, the share of what is left of the budget a step may spend (``"share"``)."""
+        r"""$\alpha$, the share of what is left of the budget a step may spend (``"share"``)."""
         self.risk_weight = rb.check_weight(risk_weight, scale=scale, unit=unit)
-        """w, the weight of sum_n R_{n|k} in the objective (None: none); fixed at construction."""
+        r"""$w$, the weight of $\sum_n R_{n|k}$ in the objective (None: none); fixed at construction."""
         self._spent: dict[int, float] = {}
         self._budget_backoff = checks.positive("backoff", kwargs.get("backoff", 1e-3), strict=False)
         if risk not in self.RISK_METHODS:
@@ -164,7 +166,7 @@ class SMPC(PathFollowingMPC):
 
     @property
     def risk_tolerance(self) -> float:
-        """epsilon [units of the severity]; ``math.inf`` (with a budget only): no per-step bound."""
+        r"""$\epsilon$ [units of the severity]; ``math.inf`` (with a budget only): no per-step bound."""
         return self._requested_epsilon
 
     @risk_tolerance.setter
@@ -184,8 +186,8 @@ class SMPC(PathFollowingMPC):
         self._epsilon = rb.effective_tolerance(self._requested_epsilon, budget, self._budget_backoff, scale)
 
     def spent_risk(self, index: int = 0) -> float:
-        """spent_k of batch entry ``index``: the summed one-step risk R_{1|j} of the actions applied
-        so far in its episode, by the agent's own estimator (0 without a budget)."""
+        r"""$\mathrm{spent}_k$ of batch entry ``index``: the summed one-step risk $R_{1|j}$ of the
+        actions applied so far in its episode, by the agent's own estimator (0 without a budget)."""
         return self._spent.get(index, 0.0)
 
     @property
@@ -209,8 +211,8 @@ class SMPC(PathFollowingMPC):
         return (self.risk_budget is not None and self.budget_allocation == "horizon", bool(self.risk_weight))
 
     def _step_epsilon(self, index: int, new_episode: bool) -> float:
-        """With ``budget_allocation="share"``: ``min(epsilon, alpha (B - spent_k))``, the step's
-        share of what is left of the budget (:mod:`agents.mpc.nlp.risk_budget`); else epsilon."""
+        r"""With ``budget_allocation="share"``: $\min(\epsilon, \alpha (B - \mathrm{spent}_k))$, the
+        step's share of what is left of the budget (:mod:`agents.mpc.nlp.risk_budget`); else $\epsilon$."""
         if self.risk_budget is None:
             return self._epsilon
         if new_episode:
@@ -247,7 +249,7 @@ class SMPC(PathFollowingMPC):
         return rb.terms_parameters(self.risk_budget, spent, self.risk_weight, scale, self._budget_backoff)
 
     def _step(self, index: int, obs_vec: np.ndarray) -> SolveReport:
-        """One step; with a budget, the applied action's one-step risk R_{1|k} is added to spent."""
+        """One step; with a budget, the applied action's one-step risk $R_{1|k}$ is added to spent."""
         report = super()._step(index, obs_vec)
         if self.risk_budget is not None:
             self._spent[index] = self._spent.get(index, 0.0) + float(np.asarray(report.risk_fn())[0])
@@ -306,9 +308,9 @@ class SMPC(PathFollowingMPC):
     def _pilot_plan(
         self, index: int, obs_vec: np.ndarray, variant: str, epsilon: float = 0.0
     ) -> tuple[np.ndarray, int, tuple[CallRecord, ...]] | None:
-        """Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
+        r"""Monte Carlo, cold starts of the ``"general"`` variant: the plan of the same SMPC with
         ``pilot_samples`` draws, itself solved cold from every rollout (its evaluations cost a
-        fifth). At epsilon = 0 (``"zero"``) a plan that misses 100 draws may run into the other
+        fifth). At $\epsilon = 0$ (``"zero"``) a plan that misses 100 draws may run into the other
         400 (a solve from it took longer than the rollouts), so that variant starts from them."""
         if self._pilot is None or variant != "general":
             return None
@@ -339,7 +341,7 @@ class SMPC(PathFollowingMPC):
 
 
 def weighted(active: ca.SX, numbers: ca.SX, row: int) -> ca.SX:
-    """A row's factor on its risk in the expectation: its active flag, times its mode's weight
-    w with given beliefs (a fourth column of ``numbers``); the mixture's risk is then
-    ``sum_m w_m R_m``, exact by linearity of expectation."""
+    r"""A row's factor on its risk in the expectation: its active flag, times its mode's weight
+    $w$ with given beliefs (a fourth column of ``numbers``); the mixture's risk is then
+    $\sum_m w_m R_m$, exact by linearity of expectation."""
     return active if numbers.shape[1] <= NUMBER_COLUMNS else active * numbers[row, 3]

@@ -1,4 +1,4 @@
-"""One step of the MPC (:class:`agents.PathFollowingMPC`), a pipeline: from what the controller
+r"""One step of the MPC (:class:`agents.PathFollowingMPC`), a pipeline: from what the controller
 measured (:class:`StepInput`) and what it owns (:class:`StepContext`), the levels below; the result
 (:class:`StepResult`) says what the controller is to remember. The step never reaches back into the
 controller.
@@ -14,7 +14,7 @@ returning NaN; :attr:`agents.PathFollowingMPC.last_solve` says which level acted
     problem with its risk rows softened by L1-penalised slacks (the ``"*_soft"`` variants of
     :mod:`agents.mpc.nlp.ocp`), from the shifted plan, then the best rollouts and manoeuvres (up to
     ``cold_starts``; they replace the hard problem's cold retries). The penalty is
-    exact: where the hard problem is feasible (and rho exceeds its risk rows' multipliers) the
+    exact: where the hard problem is feasible (and $\rho$ exceeds its risk rows' multipliers) the
     soft problem's solution is the hard one's, with zero slacks. So a soft plan whose slacks
     vanish (to :data:`FEASIBLE_SLACK`) solves the hard problem, and is level (a)
     (``fallback=None``, ``retried=True``, ``variant="*_soft"``). Otherwise the soft plan, the
@@ -111,9 +111,9 @@ class StepContext:
 
 @dataclass(frozen=True)
 class StepInput:
-    """What the controller measured for one step: batch entry ``index`` with its observation, its
+    r"""What the controller measured for one step: batch entry ``index`` with its observation, its
     memory of the last step (None: a new episode), the state ``x0`` (NX,), each slot's beliefs at
-    n = 1..N (``futures``, None where absent), which slots are ``active``, the NLP ``variant``, the
+    $n = 1, \dots, N$ (``futures``, None where absent), which slots are ``active``, the NLP ``variant``, the
     risk ``data`` and the parameters ``p``."""
 
     index: int

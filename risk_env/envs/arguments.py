@@ -63,7 +63,7 @@ def build_scenario(
 
 
 def slot_count(value: Any, scenario: Scenario) -> int:
-    """The observation's object slots K: ``value`` (an integer >= 1), or None: one per object of
+    r"""The observation's object slots $K$: ``value`` (an integer $\ge 1$), or None: one per object of
     ``scenario``. Raises when the scenario has more objects than slots (none is dropped)."""
     count = len(scenario.objects)
     if value is None:
@@ -89,7 +89,7 @@ def check_variations(variations: Any, randomize: bool) -> Variations:
 
 
 def check_weight(value: Any) -> float:
-    """The env's ``reward_risk_weight``: a finite number >= 0."""
+    r"""The env's ``reward_risk_weight``: a finite number $\ge 0$."""
     weight = checks.real("reward_risk_weight", value)
     if not (math.isfinite(weight) and weight >= 0.0):
         raise ValueError(f"reward_risk_weight must be finite and >= 0, got {value!r}")

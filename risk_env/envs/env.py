@@ -27,7 +27,7 @@ OBJECT_MOTIONS: tuple[str, ...] = ("paper", "sampled")
 
 
 class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
-    """An ego vehicle follows a reference arc while road users cross it (paper Sec. VI-VII).
+    r"""An ego vehicle follows a reference arc while road users cross it (paper Sec. VI-VII).
 
     ## Description
 
@@ -36,11 +36,11 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     constant inputs: the paper's one by default, several with ``scene=`` or ``objects=``) cross
     the path. Their next positions and speeds are uncertain: the prediction model
     (:func:`risk_env.predict`) gives truncated Gaussians around each predicted mean. Each step
-    reports the collision risk of the step just taken, ``R = sum_i R_i`` with
-    ``R_i = E[I_C,i s_i]`` of object i (by linearity of expectation exactly the step's expected
+    reports the collision risk of the step just taken, $R = \sum_i R_i$ with
+    $R_i = E[I_{C,i} s_i]$ of object $i$ (by linearity of expectation exactly the step's expected
     total harm, :mod:`risk_env.risk.total_risk`), with the estimator chosen at construction, in
     ``info["risk"]`` and ``info["cost"]`` (a constraint cost for safe RL; the risk tolerance
-    epsilon is ``scenario.risk_tolerance``), and each object's term in ``info["risk_terms"]``.
+    $\epsilon$ is ``scenario.risk_tolerance``), and each object's term in ``info["risk_terms"]``.
     All numbers come from one :class:`~risk_env.scenario.scenario.Scenario` (``env.unwrapped.scenario``).
 
     ## Action Space
@@ -49,8 +49,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     | index | action | unit | default bounds |
     | --- | --- | --- | --- |
-    | 0 | ego speed v | m/s | [-4, 8] (``v_min``, ``v_max``; negative reverses) |
-    | 1 | ego turn rate omega | rad/s | [-0.8, 0.8] (``omega_max``) |
+    | 0 | ego speed $v$ | m/s | [-4, 8] (``v_min``, ``v_max``; negative reverses) |
+    | 1 | ego turn rate $\omega$ | rad/s | [-0.8, 0.8] (``omega_max``) |
 
     The env clips nothing: an action outside the Box (by more than 1e-6, relative for limits
     above 1: float32 rounding), with a NaN, of a shape other than ``(2,)`` or not of real numbers
@@ -60,24 +60,25 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box((10 + 6 K,), float32)``, K the number of object slots (``object_slots``, fixed at
+    ``Box((10 + 6 K,), float32)``, $K$ the number of object slots (``object_slots``, fixed at
     construction; by default one per object of the scenario: 16 entries for the paper's scene),
-    with finite bounds (1e5 for positions, arc length and position errors, pi for headings, 1e3
+    with finite bounds (1e5 for positions, arc length and position errors, $\pi$ for headings, 1e3
     for speeds and turn rates, [0, 1] for the flags), the same for every scenario: the scenario
     rejects what could leave them within an episode. The layout is :mod:`risk_env.observation`
     (read it with :func:`risk_env.observation.split`):
 
     | index | observation | unit |
     | --- | --- | --- |
-    | 0, 1, 2 | ego pose c1, c2, theta (wrapped to [-pi, pi)) | m, m, rad |
-    | 3, 4 | ego's last applied input v, omega | m/s, rad/s |
-    | 5 | lambda: arc length of the ego's closest path point (goal at 0) | m |
-    | 6..9 | path error e = (c1 - c1_P, c2 - c2_P, theta - theta_P, v - v_ref) at lambda | m, m, rad, m/s |
-    | 10 + 6 i | slot i's presence flag: 1.0 object i is there, 0.0 absent (the slot all zeros) | - |
-    | 11 + 6 i .. 13 + 6 i | object i's measured pose c1, c2, theta (wrapped) | m, m, rad |
-    | 14 + 6 i, 15 + 6 i | object i's measured inputs v, omega | m/s, rad/s |
+    | 0, 1, 2 | ego pose $c_1, c_2, \theta$ (wrapped to $[-\pi, \pi)$) | m, m, rad |
+    | 3, 4 | ego's last applied input $v, \omega$ | m/s, rad/s |
+    | 5 | $\lambda$: arc length of the ego's closest path point (goal at 0) | m |
+    | 6..9 | path error $e$ at $\lambda$ (below) | m, m, rad, m/s |
+    | 10 + 6 i | slot $i$'s presence flag: 1.0 object $i$ is there, 0.0 absent (the slot all zeros) | - |
+    | 11 + 6 i .. 13 + 6 i | object $i$'s measured pose $c_1, c_2, \theta$ (wrapped) | m, m, rad |
+    | 14 + 6 i, 15 + 6 i | object $i$'s measured inputs $v, \omega$ | m/s, rad/s |
 
-    Object i of the scenario fills slot i; slots beyond the episode's objects are absent. The
+    The path error at $\lambda$ is $e = (c_1 - c_{1,P}, c_2 - c_{2,P}, \theta - \theta_P, v - v_{ref})$.
+    Object $i$ of the scenario fills slot $i$; slots beyond the episode's objects are absent. The
     objects are measured exactly; their uncertainty is that of their *future*.
 
     ## Transition
@@ -86,17 +87,17 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     1. validate the action;
     2. the ego moves: the unicycle of :mod:`risk_env.models.dynamics` (the map of
-       :func:`risk_env.models.dynamics.step`) over ``dt`` with ``(v, omega)``;
-    3. each object moves. Its belief ``B_i = predict(scenario, measurement_i, steps=1)[1]`` (with
+       :func:`risk_env.models.dynamics.step`) over ``dt`` with $(v, \omega)$;
+    3. each object moves. Its belief $B_i$, ``predict(scenario, measurement_i, steps=1)[1]`` (with
        its own uncertainty; a ``predictor``'s mixture at step 1 instead, its risk
-       ``sum_m w_m R_m``) is made from its measurement *before* it moves.
+       $\sum_m w_m R_m$), is made from its measurement *before* it moves.
        ``object_motion="paper"`` (default): it follows its unicycle with its constant inputs,
-       which is exactly B_i's mean. ``"sampled"``: its next (c1, c2, v) is one draw from B_i
+       which is exactly $B_i$'s mean. ``"sampled"``: its next $(c_1, c_2, v)$ is one draw from $B_i$
        (``self.np_random``: 3 uniforms per object, in order), its heading advances with the mean
-       model, and the drawn v becomes its measured speed, so the reported risk is exactly the
+       model, and the drawn $v$ becomes its measured speed, so the reported risk is exactly the
        expected severity of what then happens;
-    4. risk ``R_{k+1|k} = sum_i R_i``: each B_i evaluated by its estimator (radius r_e + r_o,i,
-       its mass in the severity) at the ego's new state ``(c1, c2, theta, v)`` with v the applied
+    4. risk $R_{k+1|k} = \sum_i R_i$: each $B_i$ evaluated by its estimator (radius $r_e + r_{o,i}$,
+       its mass in the severity) at the ego's new state $(c_1, c_2, \theta, v)$ with $v$ the applied
        speed (Monte Carlo draws from ``self.np_random``, object by object);
     5. reward terms, termination, truncation, observation, info.
 
@@ -104,9 +105,9 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ``reward = sum(info["rewards"].values())`` with the named terms
 
-    - ``"path_error"``: ``-||e_{k+1}||``, the norm of the path error after the step (so the
-      return is minus the paper's accumulated error e_acc, without the start state's term);
-    - ``"risk"``: ``-reward_risk_weight * R_{k+1|k}`` (0 by default: the risk is a cost).
+    - ``"path_error"``: $-\|e_{k+1}\|$, the norm of the path error after the step (so the
+      return is minus the paper's accumulated error ``e_acc``, without the start state's term);
+    - ``"risk"``: $-w R_{k+1|k}$, $w$ = ``reward_risk_weight`` (0 by default: the risk is a cost).
 
     ## Starting State
 
@@ -122,8 +123,8 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    - terminated: a collision (some object's centre within r_e + r_o,i), or the goal is reached
-      (the closest path point has ``lambda >= lambda_g``; ``info["is_success"]`` is True when the
+    - terminated: a collision (some object's centre within $r_e + r_{o,i}$), or the goal is reached
+      (the closest path point has $\lambda \ge \lambda_g$; ``info["is_success"]`` is True when the
       goal is reached without a collision);
     - truncated: after ``scenario.max_steps`` steps (80 by default).
 
@@ -133,16 +134,15 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Arguments
 
     - ``uncertainty``: the paper's Table I preset, ``"low"`` (default), ``"medium"`` or ``"high"``;
-    - ``risk_tolerance``: epsilon [J for the paper's severity]; ``info["risk_violation"]`` is
-      ``risk > epsilon``;
-    - ``risk_estimator``: ``"exact"`` (default), ``"monte_carlo"`` (J = ``mc_samples``),
+    - ``risk_tolerance``: $\epsilon$ [J for the paper's severity]; ``risk_violation`` is $R > \epsilon$;
+    - ``risk_estimator``: ``"exact"`` (default), ``"monte_carlo"`` ($J$ = ``mc_samples``),
       ``"worst_case"`` or ``"grid"`` (:data:`risk_env.ESTIMATOR_NAMES`), one per object;
     - ``object_motion``: ``"paper"`` or ``"sampled"`` (see Transition);
-    - ``reward_risk_weight``: w >= 0 of the reward's risk term;
+    - ``reward_risk_weight``: $w \ge 0$ of the reward's risk term;
     - ``scene``: which road users cross, :data:`risk_env.SCENE_NAMES` (:mod:`risk_env.scenario.scenes`):
       ``"paper"`` (default, its one object), ``"two_crossing"`` (a second one crossing from the
       other side), ``"four_crossing"``; the ``objects=[...]`` override gives any list instead;
-    - ``object_slots``: K, the observation's object slots (default: the scenario's number of
+    - ``object_slots``: $K$, the observation's object slots (default: the scenario's number of
       objects; fewer raises);
     - ``predictor``: the objects' one-step beliefs: ``None`` or ``"constant"`` (default, the
       paper's) or any :class:`risk_env.prediction.Predictor` (its mixture's risk; see Transition);
@@ -162,18 +162,18 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Info
 
     Returned by ``step`` (and by ``reset``, with risks 0, ``risk_violation`` False and the reward
-    terms 0); M is the number of objects of ``base_scenario``:
+    terms 0); $M$ is the number of objects of ``base_scenario``:
 
     | key | value |
     | --- | --- |
-    | ``risk``, ``cost`` | R_{k+1|k} = sum_i R_i (float) |
-    | ``risk_terms`` | R_i of each object, in scenario order, ``(M,)`` float64 (0 for an absent one) |
+    | ``risk``, ``cost`` | $R_{k+1|k} = \sum_i R_i$ (float) |
+    | ``risk_terms`` | $R_i$ of each object, in scenario order, ``(M,)`` float64 (0 for an absent one) |
     | ``episode_risk`` | sum of ``risk`` since ``reset`` (float): Safety-Gymnasium's per-episode cost |
     | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
-    | ``collision`` | some object within ``r_e + r_o,i`` (bool) |
+    | ``collision`` | some object within $r_e + r_{o,i}$ (bool) |
     | ``distance`` | smallest centre distance ego-object after the step [m] (float) |
     | ``closest_object`` | index of the object at that distance (int) |
-    | ``path_error`` | e at the closest path point, ``(4,)`` float64 |
+    | ``path_error`` | $e$ at the closest path point, ``(4,)`` float64 |
     | ``lambda`` | arc length of the closest path point [m] (float) |
     | ``ego``, ``object`` | true ``(c1, c2, theta, v)`` of the ego, of the first object, ``(4,)`` float64 |
     | ``objects`` | the same of every object, ``(M, 4)`` float64 (zeros for an absent one) |
@@ -225,7 +225,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         self.base_scenario: Scenario = base
         """The scenario given at construction (the episodes' own with ``randomize=False``)."""
         self.scenario: Scenario = base
-        """The current episode's scenario; its ``risk_tolerance`` is the env's epsilon."""
+        r"""The current episode's scenario; its ``risk_tolerance`` is the env's $\epsilon$."""
         self.object_slots: int = arguments.slot_count(object_slots, base)
         """K: the observation's object slots."""
         self.randomize = checks.flag("randomize", randomize)
@@ -254,7 +254,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     @property
     def epsilon(self) -> float:
-        """The risk tolerance epsilon (``scenario.risk_tolerance``)."""
+        r"""The risk tolerance $\epsilon$ (``scenario.risk_tolerance``)."""
         return self.scenario.risk_tolerance
 
     @property

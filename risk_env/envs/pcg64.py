@@ -1,17 +1,17 @@
-"""numpy's PCG64 generators stepped many at once: the batched env's draws without a Python loop.
+r"""numpy's PCG64 generators stepped many at once: the batched env's draws without a Python loop.
 
 Each copy of :class:`~risk_env.envs.vector_env.RiskCrossingVectorEnv` owns a ``np.random.Generator``
-(PCG64, as Gymnasium seeds them), so that copy i draws exactly what a single env seeded alike
+(PCG64, as Gymnasium seeds them), so that copy $i$ draws exactly what a single env seeded alike
 would. Asking 1,024 generators for 3 numbers each costs ~0.6 us per generator in a Python loop.
 :class:`PCG64Batch` holds their 128-bit states as ``uint64`` arrays and computes what
 ``Generator.random(k)`` returns for every generator at once, bit for bit
 (``tests/test_pcg64.py``), in some 40 numpy calls whatever the batch.
 
 PCG64 (O'Neill's PCG XSL RR 128/64, numpy's ``pcg64.h``): the state advances as
-``s <- s M + inc (mod 2^128)``; a draw outputs ``rotr64(hi(s) ^ lo(s), hi(s) >> 58)`` of the new
-state; ``random()`` is its top 53 bits times 2^-53. ``j`` draws ahead the state is
-``M^j s + inc (M^(j-1) + ... + 1)``, so every draw of a call is one 128-bit multiply-add from the
-state before it.
+$s \leftarrow s M + \mathrm{inc} \pmod{2^{128}}$; a draw outputs
+``rotr64(hi(s) ^ lo(s), hi(s) >> 58)`` of the new state; ``random()`` is its top 53 bits times
+$2^{-53}$. $j$ draws ahead the state is $M^j s + \mathrm{inc}\, (M^{j-1} + \dots + 1)$, so every
+draw of a call is one 128-bit multiply-add from the state before it.
 """
 
 from __future__ import annotations

@@ -59,15 +59,15 @@ def advance_one(
     rng: np.random.Generator,
     predictor: Predictor | None = None,
 ) -> tuple[tuple[float, float, float], list[Measurement], list[float]]:
-    """Steps 1-3 of the transition for one state, in Python floats (the MATH face).
+    r"""Steps 1-3 of the transition for one state, in Python floats (the MATH face).
 
-    The ego at ``pose (c1, c2, theta)`` moves under ``action = (v, omega)``; each object i moves
-    from its one-step belief B_i, made from its measurement ``measurements[i]`` with
+    The ego at ``pose`` $(c_1, c_2, \theta)$ moves under ``action`` $= (v, \omega)$; each object $i$
+    moves from its one-step belief $B_i$, made from its measurement ``measurements[i]`` with
     ``uncertainties[i]`` (``uniforms``: 3 floats on [0, 1) per object, in order, for the sampled
-    motion; None for the paper's); its risk term R_i is the ego's new state against B_i by
+    motion; None for the paper's); its risk term $R_i$ is the ego's new state against $B_i$ by
     ``estimators[i]`` (Monte Carlo draws from ``rng``, object by object). Returns the new pose, the
-    new measurements and the terms R_i (their sum is the step's risk,
-    :mod:`risk_env.risk.total_risk`). With a ``predictor`` (None: the paper's, built in) B_i is its
+    new measurements and the terms $R_i$ (their sum is the step's risk,
+    :mod:`risk_env.risk.total_risk`). With a ``predictor`` (None: the paper's, built in) $B_i$ is its
     mixture's step 1 (:func:`_advance_by`).
     """
     v, omega = action
@@ -102,7 +102,7 @@ def _advance_object(
     uniforms: list[float] | None,
     rng: np.random.Generator,
 ) -> tuple[Measurement, float]:
-    """One object's step of :func:`advance_one`: its next measurement and its risk term R_i."""
+    """One object's step of :func:`advance_one`: its next measurement and its risk term $R_i$."""
     belief = predict_step(scenario, measurement, 1, MATH, uncertainty)
     return move_object(belief, measurement, uniforms, MATH), estimator.risk_one(ego, belief, rng=rng)
 
@@ -118,11 +118,11 @@ def _advance_by(
     index: int,
     rng: np.random.Generator,
 ) -> tuple[Measurement, float]:
-    """Object ``index``'s step with a ``predictor``: B_i is its mixture at n = 1, the risk term
-    R_i the mixture's (:func:`~risk_env.risk.mixture_risk.mixture_risk`: sum_m w_m R_m, or the
+    r"""Object ``index``'s step with a ``predictor``: $B_i$ is its mixture at $n = 1$, the risk term
+    $R_i$ the mixture's (:func:`~risk_env.risk.mixture_risk.mixture_risk`: $\sum_m w_m R_m$, or the
     worst case over the modes). The paper's motion stays the object's own unicycle; the sampled
     one draws from the mixture: the mode by one more uniform from ``rng`` when there are several,
-    then (c1, c2, v) from it with the object's 3 uniforms."""
+    then $(c_1, c_2, v)$ from it with the object's 3 uniforms."""
     modes = predictor.predict(measurement, 1).at(1)
     risk = float(mixture_risk(estimator, ego, modes, rng=rng))
     if uniforms is None:
@@ -149,11 +149,11 @@ class Observed(NamedTuple):
     closest: Any
     """Index of the object at that distance (int)."""
     collision: Any
-    """Whether some present object i is within ``r_e + r_o,i``."""
+    """Whether some present object $i$ is within $r_e + r_{o,i}$."""
     goal: Any
-    """``lam >= lambda_g``."""
+    r"""$\lambda \ge \lambda_g$ (``lam``)."""
     error_norm: Any
-    """``||e||`` [mixed units, as the paper's e_acc]."""
+    r"""$\|e\|$ [mixed units, as the paper's ``e_acc``]."""
 
 
 def observe(
@@ -167,9 +167,9 @@ def observe(
     present: Sequence[Any] | None = None,
     ops: Ops = NUMPY,
 ) -> Observed:
-    """Observation and the state's path error, progress, distance, collision and goal flags.
+    r"""Observation and the state's path error, progress, distance, collision and goal flags.
 
-    ``measurements``: one per object (M <= ``slots``), filling slots 0..M-1; ``present``: None
+    ``measurements``: one per object ($M \le$ ``slots``), filling slots $0, \dots, M-1$; ``present``: None
     (every object present) or one flag per object, a bool or ``(B,)`` bools (an absent object's
     slot is all zeros, and it neither collides nor counts for the distance).
     """
@@ -243,7 +243,7 @@ def observe(
 
 
 def reward_terms(error_norm: Any, risk: Any, risk_weight: float) -> dict[str, Any]:
-    """The named reward terms of a step: ``-||e_{k+1}||`` and ``-w R_{k+1|k}``."""
+    r"""The named reward terms of a step: $-\|e_{k+1}\|$ and $-w R_{k+1|k}$."""
     return {"path_error": 0.0 - error_norm, "risk": 0.0 - risk_weight * risk}
 
 
@@ -257,12 +257,12 @@ def view(
     episode_risk: float,
     risk_weight: float | None,
 ) -> tuple[np.ndarray, dict[str, Any], bool]:
-    """The single env's observation ``(10 + 6 K,)``, ``info`` (see
+    r"""The single env's observation ``(10 + 6 K,)``, ``info`` (see
     :class:`~risk_env.envs.env.RiskCrossingEnv`) and whether the goal is reached, from its
-    ``state``: the ego's pose (c1, c2, theta) and last input (v, omega), the episode's objects'
-    measurements (c1, c2, theta, v, omega) and which of the base scenario's M objects are
-    ``present``; ``radii``: r_e + r_o,i of the M objects; ``terms``: each episode object's R_i;
-    ``risk_weight``: the reward's w (None at reset: the reward terms are 0)."""
+    ``state``: the ego's pose $(c_1, c_2, \theta)$ and last input $(v, \omega)$, the episode's objects'
+    measurements $(c_1, c_2, \theta, v, \omega)$ and which of the base scenario's $M$ objects are
+    ``present``; ``radii``: $r_e + r_{o,i}$ of the $M$ objects; ``terms``: each episode object's $R_i$;
+    ``risk_weight``: the reward's $w$ (None at reset: the reward terms are 0)."""
     pose, ego_input, objects, present = state
     seen = observe(scenario.path, scenario.ego.v_ref, radii, pose, ego_input, objects, slots, None, MATH)
     if risk_weight is None:

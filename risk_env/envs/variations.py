@@ -32,7 +32,7 @@ class Variations:
     """Half ranges of the uniform draws around the base scenario's values (0 switches one off)."""
 
     curvature: float = 0.004
-    """kappa [1/m]; clipped so the path stays followable at v_ref and does not close on itself."""
+    r"""$\kappa$ [1/m]; clipped so the path stays followable at $v_{ref}$ and does not close on itself."""
     ego_shift: float = 5.0
     """The ego's start moves along the path by up to this much [m]."""
     ego_offset: float = 1.5
@@ -75,7 +75,7 @@ class Start(NamedTuple):
     """What :func:`draw` draws: floats for one episode, arrays ``(B,)`` for a batch of them."""
 
     curvature: Any
-    """kappa of the path [1/m]."""
+    r"""$\kappa$ of the path [1/m]."""
     ego: tuple[Any, Any, Any]
     """The ego's start ``(c1 [m], c2 [m], theta [rad])``."""
     objects: tuple[tuple[Any, Any, Any, Any], ...]

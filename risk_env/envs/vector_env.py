@@ -120,7 +120,7 @@ class RiskCrossingVectorEnv(VectorEnv):
 
     @property
     def epsilon(self) -> float:
-        """The risk tolerance epsilon of every copy."""
+        r"""The risk tolerance $\epsilon$ of every copy."""
         return self.base_scenario.risk_tolerance
 
     # ---------------------------------------------------------------- gym API
@@ -154,7 +154,7 @@ class RiskCrossingVectorEnv(VectorEnv):
     def step(
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Step every copy with ``actions (B, 2)`` = (v [m/s], omega [rad/s]) per copy."""
+        r"""Step every copy with ``actions (B, 2)`` = ($v$ [m/s], $\omega$ [rad/s]) per copy."""
         if not self._started:
             raise gym.error.ResetNeeded("call reset() before step()")
         n, s = self.num_envs, self.base_scenario
@@ -208,7 +208,7 @@ class RiskCrossingVectorEnv(VectorEnv):
 
     def _advance(self, a: np.ndarray, active: np.ndarray | None) -> np.ndarray:
         """Steps 1-3 of the transition for every copy at once (numpy); the new state replaces
-        the old where a copy steps. Returns the terms R_i ``(M, B)``, 0 where a copy did not step
+        the old where a copy steps. Returns the terms $R_i$ ``(M, B)``, 0 where a copy did not step
         or object i is absent."""
         s, state = self.base_scenario, self._state
         v, omega = a[:, 0], a[:, 1]
@@ -329,7 +329,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         self._episode_risk[index] = 0.0
 
     def _risk(self, ego_state: np.ndarray, beliefs: list[Belief], active: np.ndarray | None) -> np.ndarray:
-        """The terms R_i ``(M, B)`` of ``ego_state (B, 4)`` against the beliefs ``(B,)`` of each
+        """The terms $R_i$ ``(M, B)`` of ``ego_state (B, 4)`` against the beliefs ``(B,)`` of each
         object, 0 where a copy did not step or the object is absent; Monte Carlo draws from each
         stepping copy's own generator, object by object, as the single env does."""
         terms = np.zeros((self._objects, self.num_envs))
@@ -377,7 +377,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         self, seen: Observed, terms: np.ndarray, stepped: np.ndarray, risk: np.ndarray
     ) -> dict[str, Any]:
         """The single env's info keys as arrays over copies (:func:`risk_env.envs.vector_infos.infos`),
-        from the terms R_i ``(M, B)`` and their sum ``risk``."""
+        from the terms $R_i$ ``(M, B)`` and their sum ``risk``."""
         rewards = reward_terms(seen.error_norm, risk, self.reward_risk_weight)
         if stepped is not self._mask:
             rewards = {k: np.where(stepped, v, 0.0) for k, v in rewards.items()}

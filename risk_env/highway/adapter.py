@@ -1,4 +1,4 @@
-"""Our MPC agents drive highway-env's controlled vehicle on ``intersection-v2`` (or ``-v1``).
+r"""Our MPC agents drive highway-env's controlled vehicle on ``intersection-v2`` (or ``-v1``).
 
 :class:`IntersectionAdapter` sits between highway-env and an agent that speaks RiskCrossing
 (``action, _ = agent.predict(obs)``, :mod:`risk_env.observation`): it turns highway-env's
@@ -30,10 +30,10 @@ travel (they differ by the slip angle, up to ~0.2 rad in a tight turn).
 
 **The ego** is measured with its direction of travel (heading plus the slip angle of the steering the
 adapter applied) and speed; its last input is that speed with the turn rate last asked for. The
-action: acceleration ``(v - v_now) / T`` so that the speed reaches v at the end of the step (the
-unicycle jumps to v at once, so highway-env's vehicle lags ``(v - v_now) T / 2`` metres behind the
-plan per step), and the steering whose kinematic-bicycle turn rate at the step's mean speed is
-omega. It needs highway-env's kinematic vehicle (``"dynamical": False``) and an unnormalised,
+action: acceleration $(v - v_{now}) / T$ so that the speed reaches $v$ at the end of the step (the
+unicycle jumps to $v$ at once, so highway-env's vehicle lags $(v - v_{now})\, T / 2$ metres behind
+the plan per step), and the steering whose kinematic-bicycle turn rate at the step's mean speed is
+$\omega$. It needs highway-env's kinematic vehicle (``"dynamical": False``) and an unnormalised,
 absolute ``Kinematics`` observation with x, y, vx, vy and heading: :data:`INTERSECTION_CONFIG`
 (:func:`make_intersection_env`).
 """
@@ -100,8 +100,8 @@ ADAPTER_DEFAULTS: dict[str, Any] = {
     "object_radius": 2.0,
     "corridor": 1.0,
 }
-"""Scenario values the adapter changes from the paper's for the intersection: v_ref 8 m/s (the
-lanes' limit and the ego's entry speed are 10), no reversing on a road, v_max 10 m/s, discs of
+"""Scenario values the adapter changes from the paper's for the intersection: $v_{ref}$ 8 m/s (the
+lanes' limit and the ego's entry speed are 10), no reversing on a road, $v_{max}$ 10 m/s, discs of
 2 m (highway-env's 5 x 2 m cars touch at centre distances of 2 to 5.4 m; two 2 m discs at 4 m),
 a corridor of 1 m about the lane's centreline for the planned centre (the 2 m wide car stays in
 its 4 m lane: the MPC may not leave the road to escape a prediction)."""
@@ -110,8 +110,8 @@ TRACK_GATE = 2.0
 """Largest distance [m] between a vehicle and where one seen a step earlier was predicted to be,
 for the two to count as the same vehicle (turn-rate estimate)."""
 CURVE_SPEED_SHARE = 0.9
-"""On a circular lane v_ref is capped to this share of ``omega_max * radius``, so the lane stays
-followable (:class:`~risk_env.Scenario` requires ``curvature * v_ref <= omega_max``)."""
+r"""On a circular lane $v_{ref}$ is capped to this share of $\omega_{max} r$ ($r$ the lane's radius),
+so the lane stays followable (:class:`~risk_env.Scenario` requires $\kappa v_{ref} \le \omega_{max}$)."""
 
 
 VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
@@ -155,8 +155,8 @@ class IntersectionAdapter:
             :func:`risk_env.highway.highway_scenario` with :data:`ADAPTER_DEFAULTS` first.
         destination: the node the route leads to (default: the env's ``config["destination"]``).
         switch_ahead: hand over to the next lane this many metres [m] before the end of a lane
-            (2 m: about half a step at v_ref, so the hand-over comes the step before the lane ends).
-        slots: the agent's object slots K (default :data:`DEFAULT_SLOTS`): the nearest K observed
+            (2 m: about half a step at $v_{ref}$, so the hand-over comes the step before the lane ends).
+        slots: the agent's object slots $K$ (default :data:`DEFAULT_SLOTS`): the nearest $K$ observed
             vehicles are planned against, in one solve.
         predictor: how the agents predict the other vehicles: ``"lane"`` (default: their routes
             along highway-env's lanes, :class:`risk_env.highway.lanes.LanePredictor`), ``"constant"``
@@ -214,7 +214,7 @@ class IntersectionAdapter:
         """Index in :attr:`route` of the lane being followed."""
         self.slots = checks.integer("slots", slots, minimum=1)
         self.last_objects = np.zeros((0, 5))
-        """Measurements ``(m, 5)``, m <= :attr:`slots`, of the vehicles planned against at the last
+        r"""Measurements ``(m, 5)``, $m \le$ :attr:`slots`, of the vehicles planned against at the last
         step, nearest first."""
         self.last_solves: list[Any] = []
         """The solve report of the last step (one)."""

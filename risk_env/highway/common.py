@@ -1,10 +1,11 @@
-"""What the wrapper, the adapter and the graphics share: highway-env's import, its step length, a
+r"""What the wrapper, the adapter and the graphics share: highway-env's import, its step length, a
 vehicle as our unicycle measurement, and the scenario that carries our numbers into its world.
 
-Frames: we use highway-env's world coordinates as they are, ``(c1, c2) = (x, y)`` [m] and headings
-[rad] from the x axis toward y. highway-env moves its vehicles with ``dx/dt = v (cos, sin)(heading +
-beta)``, the same equations as our unicycle, so every formula of :mod:`risk_env` holds there
-unchanged (highway-env's screen shows y downward: a mirror image, nothing more).
+Frames: we use highway-env's world coordinates as they are, $(c_1, c_2) = (x, y)$ [m] and headings
+[rad] from the x axis toward y. highway-env moves its vehicles with
+$\dot q = v\, (\cos, \sin)(\psi + \beta)$ (heading $\psi$, slip angle $\beta$), the same equations
+as our unicycle, so every formula of :mod:`risk_env` holds there unchanged (highway-env's screen
+shows y downward: a mirror image, nothing more).
 """
 
 from __future__ import annotations
@@ -68,14 +69,15 @@ def slip_angle(steering: float) -> float:
 
 
 def vehicle_measurement(vehicle: Any) -> np.ndarray:
-    """A highway-env vehicle as our unicycle measurement ``(c1 [m], c2 [m], theta [rad], v [m/s],
-    omega [rad/s])``, ``(5,)`` float64.
+    r"""A highway-env vehicle as our unicycle measurement $(c_1, c_2, \theta, v, \omega)$ [m, m, rad,
+    m/s, rad/s], ``(5,)`` float64.
 
-    theta is the direction of travel (heading plus slip angle) and omega its rate, so that our
+    $\theta$ is the direction of travel (heading plus slip angle) and $\omega$ its rate, so that our
     unicycle with these inputs moves the vehicle's centre exactly as highway-env does while the
     vehicle keeps its speed and steering: for the kinematic ``Vehicle`` (and the IDM/MDP vehicles
-    built on it) ``beta = atan(tan(steering) / 2)``, ``omega = v sin(beta) / (length / 2)``; for the
-    dynamic ``BicycleVehicle`` the slip comes from its lateral speed and omega is its yaw rate.
+    built on it) $\beta = \arctan(\tan(\delta) / 2)$, $\omega = v \sin(\beta) / (l / 2)$ (steering
+    $\delta$, length $l$); for the dynamic ``BicycleVehicle`` the slip comes from its lateral speed and
+    $\omega$ is its yaw rate.
     """
     x, y = (float(c) for c in vehicle.position)
     heading, speed = float(vehicle.heading), float(vehicle.speed)

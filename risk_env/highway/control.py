@@ -18,11 +18,11 @@ MIN_TURN_SPEED = 0.5
 def highway_action(
     v: float, omega: float, speed: float, steering: float, dt: float, half_length: float, action_type: Any
 ) -> tuple[np.ndarray, float]:
-    """``(v [m/s], omega [rad/s])`` held for ``dt`` [s], from the current ``speed`` [m/s] and
+    r"""$(v, \omega)$ [m/s, rad/s] held for ``dt`` [s], from the current ``speed`` [m/s] and
     ``steering`` [rad] of a vehicle of half length ``half_length`` [m], as the normalised action
     ``(2,)`` float32 of highway-env's ``action_type`` (a ``ContinuousAction``), and the steering
     angle [rad] it applies: acceleration ``(v - speed) / dt``, and the steering whose kinematic
-    bicycle turns at omega at the step's mean speed (:func:`slip_for`)."""
+    bicycle turns at $\omega$ at the step's mean speed (:func:`slip_for`)."""
     accel = (v - speed) / dt
     mean = 0.5 * (v + speed)
     if abs(mean) < MIN_TURN_SPEED:
@@ -40,13 +40,13 @@ def highway_action(
 def slip_for(
     omega: float, mean_speed: float, half_length: float, beta_now: float, beta_max: float, dt: float
 ) -> float:
-    """The slip angle beta [rad] whose step ends at the heading the unicycle predicts.
+    r"""The slip angle $\beta$ [rad] whose step ends at the heading the unicycle predicts.
 
-    Changing the steering turns the direction of travel at once by ``beta - beta_now``; then
-    it turns at ``mean_speed sin(beta) / (length/2)`` for T. Solve
-    ``beta - beta_now + T mean_speed sin(beta) / (length/2) = omega T`` (Newton from the
+    Changing the steering turns the direction of travel at once by $\beta - \beta_{now}$; then
+    it turns at $\bar v \sin(\beta) / (l/2)$ for $T$ ($\bar v$ = ``mean_speed``, $l$ the length).
+    Solve $\beta - \beta_{now} + T \bar v \sin(\beta) / (l/2) = \omega T$ (Newton from the
     small-angle solution), so the course at the end of the step is the model's (the chord's
-    direction then differs by ``(beta - beta_now) / 2``, instead of the whole jump).
+    direction then differs by $(\beta - \beta_{now}) / 2$, instead of the whole jump).
     """
     gain = mean_speed / half_length
 

@@ -102,7 +102,7 @@ def draw_polyline(
 
 
 def draw_beliefs(surface: WorldSurface, beliefs: Sequence[Belief]) -> None:
-    """Truncation boxes and means of beliefs n = 1..N (near: dark orange, far: pale)."""
+    r"""Truncation boxes and means of beliefs $n = 1, \dots, N$ (near: dark orange, far: pale)."""
     count = len(beliefs)
     for n, b in reversed(list(enumerate(beliefs))):
         colour = blend(BOX_NEAR, BOX_FAR, n / max(count - 1, 1))
@@ -124,7 +124,7 @@ def box_corners(x: float, y: float, half_x: float, half_y: float, frame: float) 
 def draw_mixtures(
     surface: WorldSurface, mixtures: Sequence[Mixture], min_opacity: float = MIN_OPACITY
 ) -> None:
-    """Every mode of every mixture over n = 1..N: its truncation boxes in the mode's own frame
+    r"""Every mode of every mixture over $n = 1, \dots, N$: its truncation boxes in the mode's own frame
     (the belief's ``frame`` [rad], 0 when it has none: the world's axes) and its means joined,
     near dark orange to far pale, with the mode's weight as opacity (at least ``min_opacity``, so
     an unlikely mode stays visible). Drawn on a transparent layer blended onto ``surface``."""

@@ -17,8 +17,8 @@ LaneIndex = tuple[str, str, int]
 
 
 def lane_path(lane: Any) -> ReferencePath:
-    """The highway-env lane as our arc: goal = the lane's end (position and heading), curvature 0
-    (``StraightLane``) or ``direction / radius`` (``CircularLane``), ``lambda_start = -length``."""
+    r"""The highway-env lane as our arc: goal = the lane's end (position and heading), curvature 0
+    (``StraightLane``) or ``direction / radius`` (``CircularLane``), $\lambda_{start} = -\mathrm{length}$."""
     from highway_env.road.lane import CircularLane, SineLane, StraightLane
 
     if isinstance(lane, CircularLane):
@@ -49,7 +49,7 @@ class RoutePath:
     lanes: tuple[LaneIndex, ...]
     """highway-env lane indices ``(from, to, id)``, in driving order."""
     paths: tuple[ReferencePath, ...]
-    """The lanes as arcs (same order), each ending at its lane's end with lambda_g = 0."""
+    r"""The lanes as arcs (same order), each ending at its lane's end with $\lambda_g = 0$."""
 
     def __post_init__(self) -> None:
         if not self.paths or len(self.paths) != len(self.lanes):

@@ -19,14 +19,14 @@ from risk_env.scenario.scenario import Scenario
 
 
 class RiskCostWrapper(gym.Wrapper):
-    """Adds the paper's collision risk between the controlled vehicle and every other vehicle.
+    r"""Adds the paper's collision risk between the controlled vehicle and every other vehicle.
 
-    After each step, for every vehicle ``j`` that was on the road before the step, the term
-    ``R_j = E[I_C s]`` is what ``RiskCrossing-v0`` reports as ``R_{k+1|k}``: the one-step belief
-    ``predict(scenario, m_j, steps=1)[1]`` from ``j``'s measurement ``m_j`` *before* the step
+    After each step, for every vehicle $j$ that was on the road before the step, the term
+    $R_j = E[I_C s]$ is what ``RiskCrossing-v0`` reports as $R_{k+1|k}$: the one-step belief
+    ``predict(scenario, m_j, steps=1)[1]`` from $j$'s measurement $m_j$ *before* the step
     (:func:`risk_env.highway.vehicle_measurement`: position, direction of travel, speed, turn
     rate), evaluated by the estimator at the controlled vehicle's state *after* the step
-    ``(c1, c2, theta, v)``. Vehicles are discs of ``scenario.ego.radius`` and
+    $(c_1, c_2, \theta, v)$. Vehicles are discs of ``scenario.ego.radius`` and
     ``scenario.object.radius`` (1.5 m unless overridden: highway-env's 5 x 2 m rectangles touch at
     centre distances from 2 to 5.4 m).
 
@@ -34,9 +34,9 @@ class RiskCostWrapper(gym.Wrapper):
 
     | key | value |
     | --- | --- |
-    | ``risk``, ``cost`` | ``sum_j R_j`` (float; units of the severity, J for the paper's) |
+    | ``risk``, ``cost`` | $\sum_j R_j$ (float; units of the severity, J for the paper's) |
     | ``risk_violation`` | ``risk > scenario.risk_tolerance`` (bool) |
-    | ``risk_terms`` | ``{index of j in env.unwrapped.road.vehicles after the step: R_j}`` |
+    | ``risk_terms`` | $R_j$ by $j$'s index in ``env.unwrapped.road.vehicles`` after the step (dict) |
 
     Actions are checked against the env's action space before highway-env sees them: a ``Box``
     takes finite real numbers of its shape (highway-env clips their range itself), a ``Discrete``
@@ -53,14 +53,14 @@ class RiskCostWrapper(gym.Wrapper):
         estimator: ``"exact"``, ``"monte_carlo"``, ``"worst_case"`` or ``"grid"``; Monte Carlo
             draws come from the wrapper's own generator (re-seeded by ``reset(seed=...)``), never
             from the env's, so the simulation is the same with any estimator.
-        risk_tolerance: epsilon for ``risk_violation``.
+        risk_tolerance: $\epsilon$ for ``risk_violation``.
         vehicle_index: which controlled vehicle is the ego (multi-agent envs).
         scenario: a whole :class:`~risk_env.Scenario` instead of ``uncertainty``, ``risk_tolerance``
             and ``overrides``; its ``dt`` must be the env's step (:func:`policy_period`).
         seed: seed of the wrapper's generator until ``reset(seed=...)`` re-seeds it.
         predictor: the vehicles' one-step beliefs: None or ``"constant"`` (the paper's), ``"lane"``
             (:class:`risk_env.highway.lanes.LanePredictor` on the env's road network) or any
-            :class:`risk_env.prediction.Predictor`; a mixture's risk is ``sum_m w_m R_m`` (the
+            :class:`risk_env.prediction.Predictor`; a mixture's risk is $\sum_m w_m R_m$ (the
             worst case over the modes for a worst-case estimator).
         **overrides: flat scenario parameters (:data:`risk_env.scenario.scenario.OVERRIDES`), on top of
             :func:`risk_env.highway.highway_scenario`'s.
@@ -155,7 +155,7 @@ class RiskCostWrapper(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
     def risk_terms(self) -> dict[int, float]:
-        """``{index in road.vehicles: R_j}`` of the vehicles measured before the step, at the
+        """$R_j$ by index in ``road.vehicles`` (dict) of the vehicles measured before the step, at the
         controlled vehicle's current state (what ``step`` reports)."""
         vehicles = unwrapped_highway(self.env).road.vehicles
         index = {id(v): i for i, v in enumerate(vehicles)}

@@ -1,12 +1,12 @@
-"""The object's prediction over the horizon (paper Sec. VI-C, the truncation centred on the predicted mean).
+r"""The object's prediction over the horizon (paper Sec. VI-C, the truncation centred on the predicted mean).
 
-From a measurement ``(c1, c2, theta, v, omega)`` the mean follows the unicycle with the measured,
-constant inputs. At step n the position and the speed are independent truncated Gaussians:
+From a measurement $(c_1, c_2, \theta, v, \omega)$ the mean follows the unicycle with the measured,
+constant inputs. At step $n$ the position and the speed are independent truncated Gaussians:
 
-- position: mean_n, standard deviations ``sigma0 + n Q`` (c1, c2), truncated to the box
-  ``mean_n +- (box_half_width0 + n Delta)``;
-- speed: mean v, standard deviation ``sigma0_v + n Q_v``, truncated to
-  ``[v_lo0 - n Delta_v, v_hi0 + n Delta_v]``.
+- position: mean $\mu_n$, standard deviations $\Sigma_0 + n Q$ ($c_1$, $c_2$), truncated to the box
+  $\mu_n \pm (h_0 + n \Delta)$ ($h_0$ = ``box_half_width0``);
+- speed: mean $v$, standard deviation $\sigma_{v,0} + n Q_v$, truncated to
+  $[v_{lo,0} - n \Delta_v, v_{hi,0} + n \Delta_v]$.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from risk_env.models.truncnorm import transform as truncnorm_transform
 from risk_env.scenario.scenario import Scenario, Uncertainty
 
 _SPREAD_FIELDS = ("sigma_x", "sigma_y", "sigma_v", "half_x", "half_y")
-"""Fields that must be finite and >= 0 (a standard deviation or a half width)."""
+r"""Fields that must be finite and $\ge 0$ (a standard deviation or a half width)."""
 
 
 @dataclass(frozen=True)
@@ -155,7 +155,7 @@ class Belief:
         return isinstance(frame, np.ndarray) and not frame.any()
 
     def _marginals(self, ops: Ops = NUMPY) -> tuple[Any, Any, Any, Any]:
-        """Mean, sigma, lower and upper bound of (c1, c2, v) of a world-aligned belief, each
+        """Mean, standard deviation, lower and upper bound of $(c_1, c_2, v)$ of a world-aligned belief, each
         ``(batch..., 3)`` (a list of 3 with :data:`~risk_env.models.ops.MATH`)."""
         mean = ops.stack([self.x, self.y, self.speed])
         sigma = ops.stack([self.sigma_x, self.sigma_y, self.sigma_v])

@@ -1,12 +1,12 @@
-"""A road user's belief over the horizon as a weighted mixture of modes.
+r"""A road user's belief over the horizon as a weighted mixture of modes.
 
 A **mode** is one hypothesis of where the road user goes (a route, a manoeuvre): a sequence of
-truncated Gaussians, one :class:`~risk_env.prediction.belief.Belief` per prediction step n = 0..N,
+truncated Gaussians, one :class:`~risk_env.prediction.belief.Belief` per prediction step $n = 0, \dots, N$,
 each with its mean, its standard deviations and truncation box in its own frame (``frame``, the
 angle of its first axis) and its speed interval. A **mixture** holds the modes with weights
-w_m >= 0 that sum to 1: the road user follows mode m with probability w_m.
+$w_m \ge 0$ that sum to 1: the road user follows mode $m$ with probability $w_m$.
 
-The risk of a mixture is ``R = sum_m w_m R_m`` for the expected risks (exact, Monte Carlo): exact
+The risk of a mixture is $R = \sum_m w_m R_m$ for the expected risks (exact, Monte Carlo): exact
 by linearity of expectation, as the sum over objects is; the robust planner instead bounds the
 worst case over every mode of weight at least a threshold
 (:meth:`risk_env.risk.estimators.RiskEstimator.mixture_risk`).
@@ -29,8 +29,8 @@ WEIGHT_TOLERANCE = 1e-6
 
 @dataclass(frozen=True)
 class Mode:
-    """One hypothesis: ``beliefs`` with a leading step axis ``(N+1,)`` on every field (n = 0..N)
-    and its weight w_m in [0, 1]; ``label`` names it (``"straight"``, ``"left"``, ...)."""
+    r"""One hypothesis: ``beliefs`` with a leading step axis ``(N+1,)`` on every field ($n = 0, \dots, N$)
+    and its weight $w_m$ in $[0, 1]$; ``label`` names it (``"straight"``, ``"left"``, ...)."""
 
     weight: float
     beliefs: Belief
@@ -42,7 +42,7 @@ class Mode:
 
     @property
     def steps(self) -> int:
-        """N, the last prediction step."""
+        """$N$, the last prediction step."""
         return int(np.shape(self.beliefs.x)[0]) - 1
 
     def at(self, n: int) -> Belief:
@@ -52,7 +52,7 @@ class Mode:
 
 @dataclass(frozen=True)
 class Mixture:
-    """The modes of one road user's belief; their weights are >= 0 and sum to 1.
+    r"""The modes of one road user's belief; their weights are $\ge 0$ and sum to 1.
 
     Raises ``ValueError`` naming the mode and field for a negative or NaN weight, weights that
     do not sum to 1 (beyond :data:`WEIGHT_TOLERANCE`), modes of different lengths, and a standard
@@ -87,7 +87,7 @@ class Mixture:
 
     @property
     def steps(self) -> int:
-        """N, the last prediction step."""
+        """$N$, the last prediction step."""
         return self.modes[0].steps
 
     @property

@@ -1,4 +1,4 @@
-"""One solver call of the MPC and what it reports: iterations, time, and the checks that keep a
+r"""One solver call of the MPC and what it reports: iterations, time, and the checks that keep a
 call bounded.
 
 **Why a call can run unbounded** (CasADi 3.8.2, fatrop 1.1.8), two mechanisms, both checked here:
@@ -9,25 +9,25 @@ call bounded.
   differ from the cached solver's, the plugin destroys it and creates another *without* setting
   the options (``new_solver`` is computed before the re-split), so every later call runs with
   fatrop's defaults (``max_iter`` 1000, ``tol`` 1e-8, ``mu_init`` 0.1) (CasADi's
-  ``FatropInterface::solve`` and ``casadi_fatrop_presolve``, since its commit 34a831e "feat solver
+  ``FatropInterface::solve`` and ``casadi_fatrop_presolve``, since CasADi's 34a831e "feat solver
   cache"). The bounds of every call of a problem must therefore have the pattern of its build
   (:func:`bound_pattern`); a call with another raises :class:`BoundPatternError` before it runs.
 - *An unbounded inertia correction.* Inside one iteration fatrop multiplies its primal
-  regularisation delta_w by 8 to 100 until every pivot of its Riccati factorisation passes a
-  relative test (pivot^2 > 1e-6 times the diagonal entry), with no upper limit (IPOPT stops at
-  1e40 and fails the call). The regularisation also reaches the inequalities' slacks, so a row
-  (or a dynamics row) with gradient a adds delta_w a a', and for every delta_w the relative pivots
-  are those of ``I + a a'``, about 1/|a|^2: once |a| is about a thousand they fail at any delta_w,
-  delta_w overflows, the matrix turns to NaN, and the call never returns, whatever ``max_iter``.
-  Traced (gdb on ``blasfeo_dpotrf_l_mn``) on the first call of ``SMPC.from_env(RiskCrossing-v0
-  medium, risk_budget=0.01)`` at seed 20011: the episode budget's row had gradients of 1.5e4 (its
-  normaliser 1/B = 100 on a risk in J); the stage's pivots failed at delta_w = 0, 1e-4, 1e-2, ...,
-  1e117 (60 tries, diagonal growing as delta_w times 4e7) and later on NaN; the call never
-  returned (killed after 120 s here, after 300 s in issue 21). The NLP keeps every row's gradient
-  in the risk rows' scale (the budget's terms in units of the severity's scale,
-  :mod:`agents.mpc.nlp.risk_budget`) and rejects the budgets and weights that would scale it up;
-  :attr:`CallRecord.overran` and the strict mode (:func:`strict_iterations`) catch any call that
-  still runs past its rung's limit.
+  regularisation $\delta_w$ by 8 to 100 until every pivot $p$ of its Riccati factorisation passes a
+  relative test ($p^2 > 10^{-6}$ times the diagonal entry), with no upper limit (IPOPT stops at 1e40
+  and fails the call). The regularisation also reaches the inequalities' slacks, so a row (or a
+  dynamics row) with gradient $a$ adds $\delta_w a a^T$, and for every $\delta_w$ the relative
+  pivots are those of $I + a a^T$, about $1/|a|^2$: once $|a|$ is about a thousand they fail at any
+  $\delta_w$, $\delta_w$ overflows, the matrix turns to NaN, and the call never returns, whatever
+  ``max_iter``. Traced (gdb on ``blasfeo_dpotrf_l_mn``) on the first call of
+  ``SMPC.from_env(RiskCrossing-v0 medium, risk_budget=0.01)`` at seed 20011: the episode budget's
+  row had gradients of 1.5e4 (its normaliser $1/B$ = 100 on a risk in J); the stage's pivots failed
+  at $\delta_w$ = 0, 1e-4, 1e-2, ..., 1e117 (60 tries, diagonal growing as $\delta_w$ times 4e7) and
+  later on NaN; the call never returned (killed after 120 s, and after 300 s in another run). The
+  NLP keeps every row's gradient in the risk rows' scale (the budget's terms in units of the
+  severity's scale, :mod:`agents.mpc.nlp.risk_budget`) and rejects the budgets and weights that
+  would scale it up; :attr:`CallRecord.overran` and the strict mode (:func:`strict_iterations`)
+  catch any call that still runs past its rung's limit.
 
 **Strict mode**: a call of more iterations than its rung allows raises
 :class:`IterationLimitError` (the tests run strict: ``tests/conftest.py`` sets

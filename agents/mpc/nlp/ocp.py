@@ -1,61 +1,65 @@
-"""The path-following optimal control problem (paper Secs. III-VI), written once as a CasADi NLP.
+r"""The path-following optimal control problem (paper Secs. III-VI), written once as a CasADi NLP.
 
 The sections of :func:`assemble`, in order:
 
-- **Variables** (multiple shooting, stage-wise as fatrop expects): per stage n = 0..N the state
-  ``x_n = (c1, c2, theta, lambda, v_{n-1}, omega_{n-1})`` and per n = 0..N-1 the input
-  ``u_n = (v, omega, u2)``. The state carries the previous input so that the rate limits and the
-  risk's ego speed are stage-local. ``x_0`` is fixed by its bounds (lbx = ubx) to the measurement:
-  the ego pose (heading unwrapped near theta_P(lambda_k)), the last applied input and lambda_k, the
-  observation's closest-point progress.
+- **Variables** (multiple shooting, stage-wise as fatrop expects): per stage $n = 0, \dots, N$ the
+  state $x_n = (c_1, c_2, \theta, \lambda, v_{n-1}, \omega_{n-1})$ and per $n = 0, \dots, N-1$ the
+  input $u_n = (v, \omega, u_2)$. The state carries the previous input so that the rate limits and
+  the risk's ego speed are stage-local. $x_0$ is fixed by its bounds (lbx = ubx) to the measurement:
+  the ego pose (heading unwrapped near $\theta_P(\lambda_k)$), the last applied input and
+  $\lambda_k$, the observation's closest-point progress.
 - **Dynamics**: the ego unicycle (:func:`risk_env.models.dynamics.casadi_step`) and the timing law
-  ``lambda_{n+1} = lambda_n + u2 cos(theta_n - theta_P(lambda_n)) T``
+  $\lambda_{n+1} = \lambda_n + u_2 \cos(\theta_n - \theta_P(\lambda_n))\, T$
   (:func:`risk_env.models.path.timing_law`).
-- **Objective**: ``sum e' W e``, ``e = (c1 - c1_P(lambda), c2 - c2_P(lambda), theta - theta_P(lambda),
-  u2 - v_ref)`` (:func:`risk_env.models.path.path_error` with the unwrapped heading), no terminal cost.
-  ``stage_cost="reached"`` (default) sums the pose part over the states n = 1..N that the inputs
-  reach and the speed part over u2_0..u2_{N-1}. The paper's sum over n = 0..N-1
-  (``stage_cost="paper"``) holds a constant pose term at n = 0 and leaves the last input
-  (v, omega)_{N-1} without any cost (it only moves x_N, which nothing weighs), so its optimum is not
-  unique there.
-- **Constraints**: ``v in [v_min, v_max]``, ``|omega| <= omega_max``; rate limits
-  ``|v_n - v_{n-1}| <= accel_max T``, ``|omega_n - omega_{n-1}| <= omega_rate_max T`` with
-  (v, omega)_{-1} the last applied input; ``u2 in [v_min, v_max]`` (the paper's u2 in V_e, the
+- **Objective**: $\sum e^T W e$,
+  $e = (c_1 - c_{1,P}(\lambda), c_2 - c_{2,P}(\lambda), \theta - \theta_P(\lambda), u_2 - v_{ref})$
+  (:func:`risk_env.models.path.path_error` with the unwrapped heading), no terminal cost.
+  ``stage_cost="reached"`` (default) sums the pose part over the states $n = 1, \dots, N$ that the
+  inputs reach and the speed part over $u_{2,0}, \dots, u_{2,N-1}$. The paper's sum over
+  $n = 0, \dots, N-1$ (``stage_cost="paper"``) holds a constant pose term at $n = 0$ and leaves the
+  last input $(v, \omega)_{N-1}$ without any cost (it only moves $x_N$, which nothing weighs), so its
+  optimum is not unique there.
+- **Constraints**: $v \in [v_{min}, v_{max}]$, $|\omega| \le \omega_{max}$; rate limits
+  $|v_n - v_{n-1}| \le a_{max} T$, $|\omega_n - \omega_{n-1}| \le \dot\omega_{max} T$ ($a_{max}$ =
+  ``accel_max``, $\dot\omega_{max}$ = ``omega_rate_max``) with $(v, \omega)_{-1}$ the last applied
+  input; $u_2 \in [v_{min}, v_{max}]$ (the paper's $u_2 \in \mathcal{V}_e$, the
   ego's own speed set, so the reference point may wait or step back with a reversing ego);
-  ``lambda_n >= lambda_0`` (the path's start) and no upper cap (the path continues beyond the goal);
-  the agent's risk constraint ``margin_n >= backoff`` for n = 1..N at the ego's predicted state n
-  with speed v_{n-1} (the input that led there: the env's R_{k+1|k}), against the object's belief at
-  step n, :func:`risk_env.predict` built symbolically on the object-measurement parameter.
-- **Parameters** (nlpsol ``p``, :func:`parameter_vector`): epsilon, v_ref, then per object slot
-  k = 0..K-1 (:data:`SLOT_SIZE` numbers): its measurement (c1, c2, theta, v, omega), ``active``
-  (1: the object is present and may reach the ego within the horizon, 0: its rows cost nothing),
-  its collision distance r_e + r_o [m], its mass m_o [kg] (for the severity) and the numbers of
+  $\lambda_n \ge \lambda_0$ (the path's start) and no upper cap (the path continues beyond the goal);
+  the agent's risk constraint $\mathrm{margin}_n \ge \mathrm{backoff}$ for $n = 1, \dots, N$ at the
+  ego's predicted state $n$ with speed $v_{n-1}$ (the input that led there: the env's $R_{k+1|k}$),
+  against the object's belief at step $n$, :func:`risk_env.predict` built symbolically on the
+  object-measurement parameter.
+- **Parameters** (nlpsol ``p``, :func:`parameter_vector`): $\epsilon$, $v_{ref}$, then per object slot
+  $k = 0, \dots, K-1$ (:data:`SLOT_SIZE` numbers): its measurement $(c_1, c_2, \theta, v, \omega)$,
+  ``active`` (1: the object is present and may reach the ego within the horizon, 0: its rows cost
+  nothing), its collision distance $r_e + r_o$ [m], its mass $m_o$ [kg] (for the severity) and the numbers of
   its :class:`~risk_env.scenario.scenario.Uncertainty` (:func:`uncertainty_vector`); then the agent's risk
   data per stage (Monte Carlo draws, every slot's); last, with the episode budget or the risk
   weight, the :data:`TERMS` numbers. Agents that differ only in their tolerance, reference speed,
   uncertainty level, start or objects share one built (or compiled) solver (:func:`problem_key`),
-  and a solver with K slots serves every scene with up to K objects without a rebuild.
+  and a solver with $K$ slots serves every scene with up to $K$ objects without a rebuild.
 - **Risk rows of many objects** (:data:`Margin`): the agent's margin returns the rows of one stage
-  for all K slots: the RMPC one row per slot (``margin_k + BIG (1 - active_k)``: an inactive slot's
-  row holds by :data:`INACTIVE` margin units, whatever its numbers), the SMPC one row per stage on
-  the sum of the slots' risks, ``sum_k active_k R_k <= epsilon``. The budget's and the weight's
-  per-stage R (:data:`RiskValue`) is that sum too: by linearity of expectation the expected total
-  harm of the step. A solver with one slot solves its risk variants only when the slot is active
-  (else ``"free"``), so there the flag is the constant 1, which CasADi folds away: the rows, their
-  derivatives and the solver's iterates are the single-object ones bit for bit (a parameter
-  equal to 1 would be exact in value, but its extra nodes reorder the derivatives' sums).
+  for all $K$ slots: the RMPC one row per slot ($\mathrm{margin}_k + \mathrm{BIG}\,(1 - a_k)$, $a_k$
+  the slot's ``active`` flag: an inactive slot's row holds by :data:`INACTIVE` margin units,
+  whatever its numbers), the SMPC one row per stage on the sum of the slots' risks,
+  $\sum_k a_k R_k \le \epsilon$. The budget's and the weight's per-stage $R$ (:data:`RiskValue`) is
+  that sum too: by linearity of expectation the expected total harm of the step. A solver with one slot
+  solves its risk variants only when the slot is active (else ``"free"``), so there the flag is the constant
+  1, which CasADi folds away: the rows, their derivatives and the solver's iterates are the single-object
+  ones bit for bit (a parameter equal to 1 would be exact in value, but its extra nodes reorder the
+  derivatives' sums).
 - **Variants** of the same NLP (:data:`VARIANTS`): ``"general"``; ``"zero"`` (the agent's exact
-  form at epsilon = 0); ``"free"``, without risk rows, used when no step's risk can be nonzero
+  form at $\epsilon = 0$); ``"free"``, without risk rows, used when no step's risk can be nonzero
   anywhere the ego can reach within the horizon: then the constraints cannot bind and the free
   problem has the same solution, at a fraction of the cost. ``"general_soft"`` and
-  ``"zero_soft"``: the risk rows softened, ``margin_n + s_n >= backoff`` with slacks ``s_n >= 0``
-  [margin units] and ``sum_n rho_n s_n`` added to the objective, ``rho_n = rho *``
-  :data:`EARLY_WEIGHT` ``**(N - n)`` (an exact L1 penalty: whenever every rho_n exceeds its risk
-  row's multiplier, every solution of the hard problem solves the soft one with s = 0, and a soft
-  solution with s = 0 solves the hard problem). A slack costs up to twice as much near the
-  object's predicted mean (:data:`NEAR_WEIGHT`): where the boxes cannot be kept off, the plan
-  misses them where the object is least likely. The slack of row n is a
-  control of stage n (the last stage's after x_N), so the problem stays stage-wise for fatrop.
+  ``"zero_soft"``: the risk rows softened, $\mathrm{margin}_n + s_n \ge \mathrm{backoff}$ with
+  slacks $s_n \ge 0$ [margin units] and $\sum_n \rho_n s_n$ added to the objective,
+  $\rho_n = \rho\, q^{N - n}$ ($\rho$ = ``soft_penalty``, $q$ = :data:`EARLY_WEIGHT`; an exact L1
+  penalty: whenever every $\rho_n$ exceeds its risk row's multiplier, every solution of the hard problem
+  solves the soft one with $s = 0$, and a soft solution with $s = 0$ solves the hard problem). A slack costs
+  up to twice as much near the object's predicted mean (:data:`NEAR_WEIGHT`): where the boxes cannot be kept
+  off, the plan misses them where the object is least likely. The slack of row $n$ is a
+  control of stage $n$ (the last stage's after $x_N$), so the problem stays stage-wise for fatrop.
 
 The solver built on this NLP lives in :mod:`agents.mpc.nlp.solver`; the controller that calls it in
 :mod:`agents.mpc.controller`.
@@ -91,22 +95,23 @@ SOFT = "_soft"
 """Suffix of the soft variants."""
 VARIANTS: tuple[str, ...] = ("general", "zero", "free", "general" + SOFT, "zero" + SOFT)
 EARLY_WEIGHT = 4.0
-"""A soft variant's slack of row n costs ``rho * EARLY_WEIGHT**(N - n)``: the earlier a violation,
-the dearer (near lexicographic: the plan keeps clear first at n = 1, then at n = 2, ...), since
+r"""A soft variant's slack of row $n$ costs $\rho\, q^{N - n}$ ($q$ = ``EARLY_WEIGHT``): the earlier a
+violation, the dearer (near lexicographic: the plan keeps clear first at $n = 1$, then at $n = 2$, ...), since
 the object's early positions are the likely ones and the later boxes only grow."""
 NEAR_WEIGHT = 1.0
-"""A soft variant's slack of row n costs up to ``1 + NEAR_WEIGHT`` times rho_n where the ego is at
-the object's predicted mean (a Gaussian bump of the belief's spread widened by r_e + r_o)."""
+r"""A soft variant's slack of row $n$ costs up to ``1 + NEAR_WEIGHT`` times $\rho_n$ where the ego is at
+the object's predicted mean (a Gaussian bump of the belief's spread widened by $r_e + r_o$)."""
 PARKED = Pose(0.0, 0.0, 0.0)
 """The pose :func:`problem_key` puts in place of the starts, which the NLP does not see."""
 NX = 6
-"""Stage state: c1 [m], c2 [m], theta [rad], lambda [m], previous v [m/s], previous omega [rad/s]."""
+r"""Stage state: $c_1$ [m], $c_2$ [m], $\theta$ [rad], $\lambda$ [m], previous $v$ [m/s], previous
+$\omega$ [rad/s]."""
 NU = 3
-"""Stage input: v [m/s], omega [rad/s], u2 [m/s]."""
+r"""Stage input: $v$ [m/s], $\omega$ [rad/s], $u_2$ [m/s]."""
 
 Margin = Callable[[ca.SX, list[Belief], ca.SX, ca.SX, ca.SX, bool], ca.SX]
-"""``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
-collision distance [m], mass [kg], zero) -> rows``: every row >= 0 iff the step's risk bound holds."""
+r"""``(ego (4,), beliefs (one per slot), epsilon, risk data (K J, 3), slot numbers (K, 3): active,
+collision distance [m], mass [kg], zero) -> rows``: every row $\ge 0$ iff the step's risk bound holds."""
 RiskValue = Callable[[ca.SX, list[Belief], ca.SX, ca.SX], ca.SX]
 """``(ego (4,), beliefs (one per slot), risk data (K J, 3), slot numbers (K, 3)) -> R``: the agent's
 per-stage risk summed over the active slots (the budget's and the cost's)."""
@@ -143,10 +148,10 @@ def stage_functions(
     slots: int = 1,
     given: bool = False,
 ) -> dict[str, ca.Function | None]:
-    """The stage functions: ``f`` (x, u) -> x_next (the ego model with the timing law),
-    ``pose_cost`` x -> the pose part of e' W e, ``risk`` (ego, beliefs (K, Belief.SIZE), epsilon,
-    data, slot numbers (K, 3), with ``given`` beliefs (K, 4): the weight w last) -> rows (None for
-    ``"free"``) and, with ``value``, ``risk_value`` (ego, beliefs, data, slot numbers) -> R (None for
+    r"""The stage functions: ``f`` (x, u) -> $x_{next}$ (the ego model with the timing law),
+    ``pose_cost`` x -> the pose part of $e^T W e$, ``risk`` (ego, beliefs (K, Belief.SIZE), $\epsilon$,
+    data, slot numbers (K, 3), with ``given`` beliefs (K, 4): the weight $w$ last) -> rows (None for
+    ``"free"``) and, with ``value``, ``risk_value`` (ego, beliefs, data, slot numbers) -> $R$ (None for
     ``"free"`` or without ``value``)."""
     sc = scenario
     dt, path, ego = sc.dt, sc.path, sc.ego
@@ -197,16 +202,16 @@ def assemble(
     slots: int = 1,
     given: bool = False,
 ) -> tuple[dict[str, Any], Layout, ca.Function]:
-    """The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
+    r"""The NLP with symbols of type ``sym`` (``ca.SX``: the stage functions inlined; ``ca.MX``:
     called) for ``slots`` object slots, its :data:`Layout` and one object's beliefs' function
-    (measurement (5,), uncertainty numbers (13,)) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` rho:
+    (measurement (5,), uncertainty numbers (13,)) -> ``(N+1, Belief.SIZE)``. ``soft_penalty`` $\rho$:
     soften the risk rows with slacks (one per stage, tagged ``(n, "s", 0)``, shared by the stage's
-    rows) at cost ``rho * s_n`` (a soft variant). ``terms`` = (budget, weight): the :data:`TERMS`
+    rows) at cost $\rho\, s_n$ (a soft variant). ``terms`` = (budget, weight): the :data:`TERMS`
     parameters at the end of p, and (with a ``risk_value`` stage function) the episode budget's
     accumulator and row, the weighted risk in the objective (see the module). ``given``: the slots'
-    beliefs at n = 1..N and their weights are parameters (:func:`~agents.mpc.nlp.parameters.given_vector`,
-    at the very end of p: any predictor's modes), not the constant-input prediction from each
-    slot's measurement."""
+    beliefs at $n = 1, \dots, N$ and their weights are parameters
+    (:func:`~agents.mpc.nlp.parameters.given_vector`, at the very end of p: any predictor's modes), not the
+    constant-input prediction from each slot's measurement."""
     sc = scenario
     N, ego = sc.horizon, sc.ego
     w_v = sc.cost_weights[3]
@@ -277,9 +282,9 @@ def assemble(
         values = {n: value(ego_at(n), stacked[n], p_data[n - 1], slot_numbers) for n in range(1, N + 1)}
 
     def near_weight(x: Any, b: Any) -> Any:
-        """A slack costs more where an object is likelier: 1 + NEAR_WEIGHT times the largest, over
+        r"""A slack costs more where an object is likelier: 1 + NEAR_WEIGHT times the largest, over
         the active slots, of a Gaussian bump at the slot's predicted mean (its belief's spread,
-        in its frame, widened by its r_e + r_o); >= 1, so the penalty stays exact."""
+        in its frame, widened by its $r_e + r_o$); $\ge 1$, so the penalty stays exact."""
         bumps = []
         for k in range(slots):
             q = b[k * Belief.SIZE : (k + 1) * Belief.SIZE]
@@ -293,7 +298,7 @@ def assemble(
         return 1.0 + NEAR_WEIGHT * bump
 
     def add_risk(n: int) -> Any:
-        """The risk row of state n (its slack added in a soft variant), at n = N the budget row;
+        """The risk row of state $n$ (its slack added in a soft variant), at $n = N$ the budget row;
         their cost terms."""
         if risk is None:
             return 0.0
@@ -310,7 +315,7 @@ def assemble(
         return cost
 
     def add_slack(n: int) -> None:
-        """The slack of row n, a control of stage n (after u_n; after x_N for n = N; the budget
+        """The slack of row $n$, a control of stage $n$ (after $u_n$; after $x_N$ for $n = N$; the budget
         row's after that)."""
         if n in S:
             w.append(S[n])
@@ -327,7 +332,8 @@ def assemble(
             add_g(lateral_offset(sc.path, X[n][0], X[n][1], CASADI), -c, c, n, "corridor")
 
     def add_accumulator(n: int) -> None:
-        """c_{n+1} = c_n + normaliser * R_n (c_1 = 0), the gap row's last component: stage-local."""
+        r"""$c_{n+1} = c_n + \nu R_n$ ($c_1 = 0$, $\nu$ the normaliser), the gap row's last component:
+        stage-local."""
         if C and n < N:
             add_g(C[n + 1] - (C[n] + p_terms[2] * values[n] if n >= 1 else 0.0), 0.0, 0.0, n, "accumulate")
 
@@ -364,8 +370,8 @@ def variable_bounds(
     x0: np.ndarray,
     slack_index: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(lbx, ubx)`` of w ``(n_w,)``: x_0 fixed to the measurement, lambda_n >= the path's start,
-    the input bounds, slacks (at ``slack_index``) >= 0."""
+    r"""``(lbx, ubx)`` of w ``(n_w,)``: $x_0$ fixed to the measurement, $\lambda_n \ge$ the path's
+    start, the input bounds, slacks (at ``slack_index``) $\ge 0$."""
     ego = scenario.ego
     lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
     if slack_index is not None:
@@ -378,7 +384,7 @@ def variable_bounds(
 
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
-    """What of the scenario is built into a solver: all but the parameters (epsilon, v_ref, the
+    r"""What of the scenario is built into a solver: all but the parameters ($\epsilon$, $v_{ref}$, the
     uncertainty, every object's numbers: each slot's are parameters) and what the NLP never sees
     (the ego's start and initial input, measured at each step; the episode's step limit). The
     slot count is the agent's, keyed beside this."""

@@ -1,5 +1,5 @@
-"""The layout of the MPC's parameter vector p (one built solver serves every scene up to its slot
-count): epsilon, v_ref, per object slot its measurement, active flag and numbers, the per-stage
+r"""The layout of the MPC's parameter vector p (one built solver serves every scene up to its slot
+count): $\epsilon$, $v_{ref}$, per object slot its measurement, active flag and numbers, the per-stage
 risk data, and the risk terms' numbers. :func:`parameter_vector` writes it; the NLP of
 :mod:`agents.mpc.nlp.ocp` reads it."""
 
@@ -17,13 +17,13 @@ SLOT_SIZE = 5 + 3 + 13
 """Parameters per object slot: measurement (5), active, collision distance [m], mass [kg],
 uncertainty numbers (13)."""
 NUMBER_COLUMNS = 3
-"""Columns of the slots' numbers the risk rows read: active flag, collision distance r_e + r_o [m],
+"""Columns of the slots' numbers the risk rows read: active flag, collision distance $r_e + r_o$ [m],
 object mass [kg]; with given beliefs a fourth, the mode's weight w."""
 INACTIVE = 1e3
 """Margin units added to an inactive slot's rows (so they hold, whatever the slot's numbers)."""
 TERMS = 5
-"""Parameters of the risk terms (:mod:`agents.mpc.nlp.risk_budget`), at the end of p: the budget B'
-(B shifted by its spare), the risk spent so far, the normaliser nu = 1/scale of the budget row and
+r"""Parameters of the risk terms (:mod:`agents.mpc.nlp.risk_budget`), at the end of p: the budget B'
+(B shifted by its spare), the risk spent so far, the normaliser $\nu = 1/\mathrm{scale}$ of the budget row and
 accumulator, the row's switch-off (1: the row always holds) and the weight w."""
 
 _UNCERTAINTY_FIELDS = (
@@ -47,7 +47,7 @@ def uncertainty_vector(scenario: Scenario, index: int = 0) -> np.ndarray:
 
 
 def slot_numbers(scenario: Scenario, slots: int) -> np.ndarray:
-    """The fixed numbers of each slot ``(K, 2 + 13)``: collision distance r_e + r_o [m], mass m_o
+    """The fixed numbers of each slot ``(K, 2 + 13)``: collision distance $r_e + r_o$ [m], mass $m_o$
     [kg] and uncertainty numbers; slot k takes object k's, the slots beyond the scenario's
     objects the last object's."""
     out = []
@@ -67,9 +67,9 @@ def parameter_vector(
     data: np.ndarray,
     terms: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The solver's ``p``, the one layout of the module: epsilon, v_ref [m/s], per slot k its
+    r"""The solver's ``p``, the one layout of the module: $\epsilon$, $v_{ref}$ [m/s], per slot k its
     measurement ``measurements[k]`` (5,), its ``active[k]`` flag and its ``numbers[k]``
-    (:func:`slot_numbers`: r_e + r_o, m_o, uncertainty (13,)), together :data:`SLOT_SIZE`; then
+    (:func:`slot_numbers`: $r_e + r_o$, $m_o$, uncertainty (13,)), together :data:`SLOT_SIZE`; then
     the per-stage risk data ``(N, K J, 3)`` (each stage's matrix column by column); last the
     :data:`TERMS` numbers (``terms``; empty or None without a budget or weight)."""
     blocks = [
@@ -91,13 +91,13 @@ def symbolic_uncertainty(p: Any) -> SimpleNamespace:
 
 
 def given_size(horizon: int) -> int:
-    """Parameters per slot of given beliefs: the weight w and the belief fields at n = 1..N."""
+    r"""Parameters per slot of given beliefs: the weight w and the belief fields at $n = 1, \dots, N$."""
     return 1 + horizon * Belief.SIZE
 
 
 def given_vector(weights: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
-    """The given beliefs' block at the end of p: per slot k its weight ``weights[k]`` and its
-    belief fields at n = 1..N, ``beliefs (K, N, Belief.SIZE)`` (``Belief.as_array`` order)."""
+    r"""The given beliefs' block at the end of p: per slot k its weight ``weights[k]`` and its
+    belief fields at $n = 1, \dots, N$, ``beliefs (K, N, Belief.SIZE)`` (``Belief.as_array`` order)."""
     weights = np.asarray(weights, float)
     beliefs = np.asarray(beliefs, float)
     return np.concatenate([np.concatenate([[w], b.ravel()]) for w, b in zip(weights, beliefs, strict=True)])

@@ -88,8 +88,8 @@ class SolverSettings:
     """Rungs of the ladder: rung r limits a call to ``max_iter // 2**r`` iterations (fatrop) or
     ``time_limit / 2**r`` seconds (IPOPT), so that a call fits the time left in a step."""
     soft_penalty: float = 1e4
-    """rho of the soft variants' exact L1 penalty ``sum_n rho * EARLY_WEIGHT**(N - n) s_n`` [cost
-    per margin unit] (:mod:`agents.mpc.nlp.ocp`)."""
+    r"""$\rho$ of the soft variants' exact L1 penalty $\sum_n \rho\, q^{N - n} s_n$ ($q$ =
+    ``EARLY_WEIGHT``) [cost per margin unit] (:mod:`agents.mpc.nlp.ocp`)."""
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -188,9 +188,10 @@ class Problem:
     evaluate: ca.Function
     """(w, p) -> (objective, g): scores initial-guess candidates."""
     rollout: ca.Function
-    """(x_0 (NX,), inputs (NU, N)) -> states (NX, N): the model f, accumulated."""
+    """($x_0$ (NX,), inputs (NU, N)) -> states (NX, N): the model $f$, accumulated."""
     beliefs: ca.Function
-    """object measurement (5,) -> (N+1, Belief.SIZE) belief fields at n = 0..N (``Belief.as_array`` order)."""
+    r"""object measurement (5,) -> (N+1, Belief.SIZE) belief fields at $n = 0, \dots, N$
+    (``Belief.as_array`` order)."""
     lbg: np.ndarray
     ubg: np.ndarray
     x_index: np.ndarray
@@ -198,16 +199,16 @@ class Problem:
     u_index: np.ndarray
     """(N, NU) positions of the inputs in w."""
     risk_rows: np.ndarray
-    """Rows of g holding the risk rows of n = 1..N (one per stage or one per object slot and stage)
+    r"""Rows of g holding the risk rows of $n = 1, \dots, N$ (one per stage or one per object slot and stage)
     and the budget's row (empty for ``"free"``)."""
     row_slack: np.ndarray
     """For each of :attr:`risk_rows`, the position of its slack in :attr:`slack_index` (a stage's
     rows share one; empty for hard variants)."""
     slack_index: np.ndarray
-    """Positions of the slacks s_n, n = 1..N (and the budget row's), in w (empty for hard
+    r"""Positions of the slacks $s_n$, $n = 1, \dots, N$ (and the budget row's), in w (empty for hard
     variants)."""
     slack_costs: np.ndarray
-    """rho_n, the cost of each slack s_n, in the order of :attr:`slack_index` (empty for hard
+    r"""$\rho_n$, the cost of each slack $s_n$, in the order of :attr:`slack_index` (empty for hard
     variants)."""
     w_tags: tuple[tuple[int, str, int], ...]
     """(stage, kind, component) of every entry of w."""
@@ -222,12 +223,12 @@ class Problem:
     times: CallTimes
     """The rungs' limits and the measured time per iteration (shared by the cached copies)."""
     acc_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    """Positions of the budget's accumulators c_n, n = 1..N, in w (empty without a budget)."""
+    r"""Positions of the budget's accumulators $c_n$, $n = 1, \dots, N$, in w (empty without a budget)."""
     acc_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    """Rows of g of c_{n+1} = c_n + nu R_n, n = 0..N-1 (empty without a budget)."""
+    r"""Rows of g of $c_{n+1} = c_n + \nu R_n$, $n = 0, \dots, N-1$ (empty without a budget)."""
     corridor_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
-    """Rows of g of the lateral offsets at n = 1..N, within +- the path's corridor (empty
-    without one)."""
+    r"""Rows of g of the lateral offsets at $n = 1, \dots, N$, within $\pm$ the path's corridor
+    (empty without one)."""
     pattern: BoundPattern | None = None
     """The split of the bounds into equalities and inequalities that every call keeps
     (:func:`agents.mpc.nlp.calls.bound_pattern`; checked by :func:`agents.mpc.nlp.calls.call_solver`)."""
@@ -386,12 +387,12 @@ def iteration_time(
     repeats: int = 2,
     pattern: BoundPattern | None = None,
 ) -> float:
-    """The time of one solver iteration [s] on the scenario's start (its objects in the first
-    slots, all active, the rest absent; epsilon; zero risk data) from rest: the fastest of
+    r"""The time of one solver iteration [s] on the scenario's start (its objects in the first
+    slots, all active, the rest absent; $\epsilon$; zero risk data) from rest: the fastest of
     ``repeats`` calls (the first also pays one-time set-up).
 
     The bounds have the steps' ``pattern`` (which entries are fixed, which infinite; the slacks
-    >= 0; :class:`agents.mpc.nlp.calls.BoundPatternError` otherwise): CasADi 3.8's fatrop splits the bounds
+    $\ge 0$; :class:`agents.mpc.nlp.calls.BoundPatternError` otherwise): CasADi 3.8's fatrop splits the bounds
     into equalities and inequalities at every call, and once a solver was called with another
     split, its later calls ignore ``max_iter`` and run on with fatrop's default options
     (:mod:`agents.mpc.nlp.calls`)."""

@@ -1,6 +1,6 @@
-"""The lane predictor's beliefs: truncated Gaussians in the lane's frame around each mode's mean.
+r"""The lane predictor's beliefs: truncated Gaussians in the lane's frame around each mode's mean.
 
-A mode's belief at step n (:func:`mode_beliefs`) lies in a frame of its route's heading
+A mode's belief at step $n$ (:func:`mode_beliefs`) lies in a frame of its route's heading
 (:attr:`Belief.frame <risk_env.prediction.belief.Belief.frame>`): the heading at the mean, or at
 the middle of the stretch of the route the road user can reach (on a circular lane, the direction
 of that stretch's chord), whichever gives the smaller box:
@@ -11,10 +11,12 @@ of that stretch's chord), whichever gives the smaller box:
   means, plus ``margin_along``. The box is the smallest one around the mean (in that frame) that
   holds the centreline between those two ends, so that on a curve it widens across the lane to
   hold the arc; across, it adds ``margin_across``.
-- The standard deviation along the lane is ``sqrt(sigma_along0^2 + (sigma_speed t)^2 +
-  (sigma_accel t^2 / 2)^2)`` (at most the box's half length), across it ``sigma_across`` (at most
-  the box's half width and half the lane's width); the speed's is ``sigma_speed + sigma_accel t``,
-  truncated to the speeds of full braking and full acceleration (and every route's mean speed).
+- The standard deviation along the lane at time $t$ is
+  $\sqrt{\sigma_{along,0}^2 + (\sigma_v t)^2 + (\sigma_a t^2 / 2)^2}$ (at most the box's half
+  length), across it $\sigma_{across}$ (at most the box's half width and half the lane's width); the
+  speed's is $\sigma_v + \sigma_a t$ ($\sigma_{along,0}$, $\sigma_v$, $\sigma_a$, $\sigma_{across}$:
+  :class:`Spread`'s ``sigma_along0``, ``sigma_speed``, ``sigma_accel``, ``sigma_across``), truncated
+  to the speeds of full braking and full acceleration (and every route's mean speed).
 """
 
 from __future__ import annotations
@@ -42,11 +44,11 @@ class Spread:
     margin_across: float = 0.5
     """Added to the truncation box across the lane, on each side [m]."""
     sigma_along0: float = 0.2
-    """Standard deviation along the lane at n = 0 [m]."""
+    """Standard deviation along the lane at $n = 0$ [m]."""
     sigma_speed: float = 0.5
-    """Standard deviation of the speed [m/s] (its growth along the lane: ``sigma_speed t``)."""
+    r"""Standard deviation of the speed [m/s] (its growth along the lane: $\sigma_v t$)."""
     sigma_accel: float = 1.5
-    """Standard deviation of the acceleration [m/s^2] (along: ``sigma_accel t^2 / 2``)."""
+    r"""Standard deviation of the acceleration [m/s²] (along: $\sigma_a t^2 / 2$)."""
     sigma_across: float = 0.2
     """Standard deviation across the lane [m]."""
 

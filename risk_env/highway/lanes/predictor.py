@@ -1,14 +1,14 @@
-"""A predictor that knows highway-env's road: one mode per route, moving along the lanes.
+r"""A predictor that knows highway-env's road: one mode per route, moving along the lanes.
 
-:class:`LanePredictor` (``name = "lane"``) maps a road user's measurement ``(x, y, theta, v,
-omega)`` to a :class:`~risk_env.prediction.mixture.Mixture` over n = 0..N, reading only the road
+:class:`LanePredictor` (``name = "lane"``) maps a road user's measurement $(x, y, \theta, v,
+\omega)$ to a :class:`~risk_env.prediction.mixture.Mixture` over $n = 0, \dots, N$, reading only the road
 network (never a vehicle's route, destination or target lane):
 
 - **Routes** (:mod:`~risk_env.highway.lanes.routes`): the lanes the road user is on (the one
   highway-env's ``get_closest_lane_index`` gives for its position and direction of travel, and
   every lane that holds it within its length and width in a heading less than 90 degrees off: a
   vehicle entering a junction lies on all its turns), and every route through the graph from
-  there, up to its first branch (``lookahead``) and as far as it can drive within the horizon.
+  there, up to its first fork (``lookahead``) and as far as it can drive within the horizon.
 - **Modes**: routes that share every lane the road user can reach within the horizon (at full
   acceleration up to the speed limit) are one mode, so a vehicle far from a junction has one mode,
   one that can reach it has one per turn, and one inside a turn has one.
@@ -20,14 +20,15 @@ network (never a vehicle's route, destination or target lane):
   yielding rule, every road user of the scene together (:meth:`LanePredictor.predict_scene`); the
   lateral offset decays to the centreline. A mode's mean is the weighted mean of its routes'.
 - **Spread** (:mod:`~risk_env.highway.lanes.beliefs`), in the lane's frame (the belief's ``frame``:
-  the route's heading at the mode's mean, or at the middle of its reachable stretch):
-  along the lane the truncation box reaches from full braking (``a_max``, to a stop) to full
-  acceleration up to the speed limit, and at least to every route's own mean, plus ``margin_along``;
-  it is the box around the mean that holds the centreline between those two ends (on a curve it
-  widens across the lane to hold the arc) plus ``margin_across``. The standard deviation along is
-  ``sqrt(sigma_along0^2 + (sigma_speed t)^2 + (sigma_accel t^2 / 2)^2)`` (at most the box), across
-  ``sigma_across`` (at most the box, and at most half the lane's width); the speed's is
-  ``sigma_speed + sigma_accel t`` within the speeds of full braking and full acceleration.
+  the route's heading at the mode's mean, or at the middle of its reachable stretch): along the lane
+  the truncation box reaches from full braking (``a_max``, to a stop) to full acceleration up to the
+  speed limit, and at least to every route's own mean, plus ``margin_along``; it is the box around
+  the mean that holds the centreline between those two ends (on a curve it widens across the lane to
+  hold the arc) plus ``margin_across``. The standard deviation along is
+  $\sqrt{\sigma_{along,0}^2 + (\sigma_v t)^2 + (\sigma_a t^2 / 2)^2}$ at time $t$ (at most the box),
+  across $\sigma_{across}$ (at most the box, and at most half the lane's width); the speed's is
+  $\sigma_v + \sigma_a t$ (:class:`~risk_env.highway.lanes.beliefs.Spread`) within the speeds of
+  full braking and full acceleration.
 - **Off the road**: a road user farther than ``off_road`` [m] from every lane (beside it, or
   before its start or beyond its end) is predicted by ``fallback`` (the paper's constant predictor,
   one mode) and counted in :attr:`LanePredictor.fallbacks`.
@@ -89,7 +90,7 @@ class LanePredictor(Predictor):
         dt: the prediction step [s] (the env's step, :func:`risk_env.highway.policy_period`).
         traffic: the speed model's numbers (:class:`~risk_env.highway.lanes.speed.TrafficModel`).
         weights: the route weights' numbers (:class:`~risk_env.highway.lanes.weights.WeightModel`).
-        lookahead: how far ahead [m] routes are followed to their first branch, whatever the horizon.
+        lookahead: how far ahead [m] routes are followed to their first fork, whatever the horizon.
         off_road: farther than this [m] from every lane, a road user goes to ``fallback``.
         spread: the beliefs' spread (:class:`~risk_env.highway.lanes.beliefs.Spread`).
         fallback: the predictor of road users off the road (default: the paper's constant

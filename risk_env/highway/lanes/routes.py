@@ -262,7 +262,7 @@ def routes_from(
     following: Callable[[LaneIndex], list[LaneIndex]] | None = None,
 ) -> list[tuple[LaneIndex, ...]]:
     """Every route (its lanes) from lane ``index`` at arc length ``s0`` [m] on it: each is extended
-    lane by lane while it ends less than ``reach`` [m] ahead, or until it has passed a branch (a
+    lane by lane while it ends less than ``reach`` [m] ahead, or until it has passed a fork (a
     lane with two or more continuations) as long as it ends less than ``lookahead`` [m] ahead; a
     lane without a continuation ends it. ``following``: :func:`next_lanes` on ``network`` unless
     given (a cache of it)."""

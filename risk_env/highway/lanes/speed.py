@@ -1,4 +1,4 @@
-"""The lane predictor's speed model: highway-env's own traffic rules, run along route hypotheses.
+r"""The lane predictor's speed model: highway-env's own traffic rules, run along route hypotheses.
 
 Each road user's route hypothesis (an *agent*: one vehicle on one
 :class:`~risk_env.highway.lanes.routes.Route`) moves along its route's centreline with the
@@ -6,8 +6,9 @@ longitudinal model of highway-env's ``IDMVehicle`` (``vehicle/behavior.py``) and
 of its ``RegulatedRoad`` (``road/regulation.py``), with the numbers of :class:`TrafficModel` (those
 ``intersection-v2`` gives its traffic):
 
-- **IDM**: ``a = A (1 - (max(v, 0) / v0)^delta) - A (d* / d)^2``, ``d* = d0 + v tau + v dv /
-  (2 sqrt(A B))``, clipped to ``+- a_max``; ``d`` and ``dv`` come from the leader, found as
+- **IDM**: $a = A (1 - (\max(v, 0) / v_0)^\delta) - A (d^* / d)^2$,
+  $d^* = d_0 + v \tau + v\, \Delta v / (2 \sqrt{A B})$, clipped to $\pm a_{max}$; $d$ and $\Delta v$
+  come from the leader, found as
   highway-env's ``Road.neighbour_vehicles`` finds it: among the other road users on the agent's
   lane, and (``connected_lanes``, highway-env 1.12's ``neighbour_vehicles_connected_lanes``, on in
   ``intersection-v2``) on every lane the graph connects before or after it. That rule also takes a
@@ -47,20 +48,20 @@ class TrafficModel:
     ``IDMVehicle`` as ``intersection-v2`` sets it and its ``RegulatedRoad``."""
 
     comfort_acceleration: float = 6.0
-    """A [m/s^2], ``IDMVehicle.COMFORT_ACC_MAX`` (``intersection-v2`` sets 6)."""
+    """$A$ [m/s²], ``IDMVehicle.COMFORT_ACC_MAX`` (``intersection-v2`` sets 6)."""
     comfort_deceleration: float = 3.0
-    """B [m/s^2], ``-IDMVehicle.COMFORT_ACC_MIN`` (``intersection-v2`` sets -3)."""
+    """$B$ [m/s²], ``-IDMVehicle.COMFORT_ACC_MIN`` (``intersection-v2`` sets -3)."""
     max_acceleration: float = 6.0
-    """a_max [m/s^2], ``IDMVehicle.ACC_MAX``: the acceleration is clipped to +- this."""
+    r"""$a_{max}$ [m/s²], ``IDMVehicle.ACC_MAX``: the acceleration is clipped to $\pm$ this."""
     distance_wanted: float = 7.0
-    """d0 [m], ``IDMVehicle.DISTANCE_WANTED`` (``intersection-v2`` sets 7)."""
+    """$d_0$ [m], ``IDMVehicle.DISTANCE_WANTED`` (``intersection-v2`` sets 7)."""
     time_wanted: float = 1.5
-    """tau [s], ``IDMVehicle.TIME_WANTED``."""
+    r"""$\tau$ [s], ``IDMVehicle.TIME_WANTED``."""
     delta: float = 4.0
-    """The IDM exponent (highway-env draws it in [3.5, 4.5] per vehicle)."""
+    r"""The IDM exponent $\delta$ (highway-env draws it in [3.5, 4.5] per vehicle)."""
     cruise_speed: float = 7.5
-    """Desired speed [m/s] assumed for a road user slower than this (highway-env's traffic enters
-    at 8 +- 1 m/s and keeps that speed as its target until it first yields, then the lane's limit).
+    r"""Desired speed [m/s] assumed for a road user slower than this (highway-env's traffic enters
+    at $8 \pm 1$ m/s and keeps that speed as its target until it first yields, then the lane's limit).
     7.5 gave the smallest 3 s error on the benchmark's first episodes (seeds 0-11; tried 0, i.e.
     the speed itself, 6, 7, 7.5, 7.75, 8, 8.5 and 10)."""
     connected_lanes: bool = True

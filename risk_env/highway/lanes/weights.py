@@ -1,31 +1,34 @@
-"""The lane predictor's route weights: a prior over the turns, updated by what is observed.
+r"""The lane predictor's route weights: a prior over the turns, updated by what is observed.
 
-For a road user measured at position p [m], direction of travel theta [rad], speed v [m/s] and
-turn rate omega [rad/s], each route r it can take (:func:`~risk_env.highway.lanes.routes.routes_from`)
-gets the weight
+For a road user measured at position $p$ [m], direction of travel $\theta$ [rad], speed $v$ [m/s]
+and turn rate $\omega$ [rad/s], each route $r$ it can take
+(:func:`~risk_env.highway.lanes.routes.routes_from`) gets the weight
 
-    w_r  proportional to  prior(turn of r) * L(offset_r) * L(heading_r) * L(turn rate_r)
+$$
+w_r \propto \mathrm{prior}(\text{turn of } r)\, L(o_r)\, L(h_r)\, L(\dot h_r)
+$$
 
-- ``offset_r``: p's lateral offset [m] from r's centreline (:meth:`Route.locate
+- $o_r$: $p$'s lateral offset [m] from $r$'s centreline (:meth:`Route.locate
   <risk_env.highway.lanes.routes.Route.locate>`);
-- ``heading_r``: theta minus r's heading there [rad];
-- ``turn rate_r``: omega minus the turn rate highway-env's own lane keeping
-  (``ControlledVehicle.steering_control``) gives a vehicle in this state that follows r
+- $h_r$: $\theta$ minus $r$'s heading there [rad];
+- $\dot h_r$: $\omega$ minus the turn rate highway-env's own lane keeping
+  (``ControlledVehicle.steering_control``) gives a vehicle in this state that follows $r$
   (:func:`steering_turn_rates`): it steers for the next lane of its route from half a vehicle length
   before the end of a lane on, so the turn rate tells the route a step before the junction;
-- ``L(e) = (1 - outlier) N(e; 0, sigma) + outlier N(e; 0, outlier_scale sigma)``: a Gaussian with
-  a wide tail, so that one odd observation cannot rule a route out;
-- below ``reliable_speed`` the heading term is left out and the turn rate's sigma grows (at low
+- $L(e) = (1 - \eta)\, \mathcal{N}(e; 0, \sigma) + \eta\, \mathcal{N}(e; 0, c \sigma)$ ($\eta$ =
+  ``outlier``, $c$ = ``outlier_scale``): a Gaussian with a wide tail, so that one odd observation
+  cannot rule a route out;
+- below ``reliable_speed`` the heading term is left out and the turn rate's $\sigma$ grows (at low
   speed highway-env's steering saturates and the body turns on the spot).
 
 Where the routes share the lane the road user is on and its lane keeping does not yet steer for a
 turn, the terms are the same for each and the prior decides; from half a vehicle length before
 the junction on, its turn rate, then its heading and offset, single its route out. The **prior**
 (``turn_prior``) weighs the turns left, straight and right, by the route's heading change over its
-first branch lane (a lane chosen among two or more that leave one node): right for more than +45
+first fork lane (a lane chosen among two or more that leave one node): right for more than +45
 degrees, left for less than -45, else straight, as highway-env draws its roads (y downward on the
 screen, so a turn toward +heading is a right turn, the tight one in its right-hand traffic);
-highway-env's traffic picks its exit uniformly, so the default is uniform. The sigmas were chosen
+highway-env's traffic picks its exit uniformly, so the default is uniform. The $\sigma$s were chosen
 on the benchmark's seeds 0-11 (``python -m benchmarks.prediction --episodes 12``) for a low Brier
 score in the junction with no true route's weight below the planner's threshold; the benchmark's
 committed run uses other seeds.
@@ -57,24 +60,24 @@ class WeightModel:
     turn_prior: tuple[float, float, float] = (1.0, 1.0, 1.0)
     """Prior weights of a left turn, straight on and a right turn (normalised over the routes)."""
     sigma_offset: float = 0.2
-    """sigma [m] of the lateral offset from a route's centreline."""
+    r"""$\sigma$ [m] of the lateral offset from a route's centreline."""
     sigma_heading: float = 0.3
-    """sigma [rad] of the heading against a route's."""
+    r"""$\sigma$ [rad] of the heading against a route's."""
     sigma_turn_rate: float = 0.05
-    """sigma [rad/s] of the turn rate against the one highway-env's lane keeping gives on a route."""
+    r"""$\sigma$ [rad/s] of the turn rate against the one highway-env's lane keeping gives on a route."""
     switch_time: float = 0.1
     """Within this time [s] (at the road user's speed) of the point where highway-env's lane keeping
     switches to a route's next lane, both lanes' turn rates are taken (the better one counts)."""
     outlier: float = 0.02
     """Share of the wide component in each term."""
     outlier_scale: float = 30.0
-    """Its width, in sigmas."""
+    """Its width, in standard deviations."""
     reliable_speed: float = 2.0
-    """Below this speed [m/s] the heading says nothing (the term is left out) and the turn rate's
-    sigma grows as ``reliable_speed / |v|``: highway-env's lane keeping saturates its steering at
+    r"""Below this speed [m/s] the heading says nothing (the term is left out) and the turn rate's
+    $\sigma$ grows as ``reliable_speed`` $/ |v|$: highway-env's lane keeping saturates its steering at
     low speed and the body turns on the spot."""
     sigma_signal: float = 0.1
-    """sigma [rad] of the turn signal's direction against a route's end (``observe_intentions``)."""
+    r"""$\sigma$ [rad] of the turn signal's direction against a route's end (``observe_intentions``)."""
 
     def __post_init__(self) -> None:
         prior = self.turn_prior
@@ -110,9 +113,9 @@ class WeightModel:
 
 
 def turn_of(route: Route) -> str:
-    """The turn of ``route`` at its first branch (see the module docstring): on its first lane
+    """The turn of ``route`` at its first fork (see the module docstring): on its first lane
     chosen among two or more that leave the same node (the first lane itself when its start node
-    has several roads); ``"straight"`` when it has no branch."""
+    has several roads); ``"straight"`` when it has no fork."""
     network = route.network
     for k, index in enumerate(route.lanes):
         choices = len(network.graph[index[0]]) if k == 0 else len(next_lanes(network, route.lanes[k - 1]))
@@ -140,13 +143,13 @@ def destination(route: Route) -> np.ndarray:
 
 
 def steering_turn_rates(route: Route, measurement: Any, switch_time: float) -> list[float]:
-    """The turn rates [rad/s] highway-env's lane keeping (``ControlledVehicle.steering_control``,
-    called as it is) gives a vehicle at ``measurement = (x, y, theta, v, omega)`` that follows
-    ``route``: it steers toward the route's lane it targets and turns at ``v sin(beta) / (length /
-    2)``. It targets the next lane from half a vehicle length before a lane's end on (as
-    ``follow_road`` switches); within ``switch_time`` [s] of that point, both lanes (the turn rate
-    was set a simulation frame before the measurement). The body heading is theta less the slip
-    angle that omega implies."""
+    r"""The turn rates [rad/s] highway-env's lane keeping (``ControlledVehicle.steering_control``,
+    called as it is) gives a vehicle at ``measurement`` $= (x, y, \theta, v, \omega)$ that follows
+    ``route``: it steers toward the route's lane it targets and turns at $v \sin(\beta) / (l / 2)$
+    (slip angle $\beta$, length $l$). It targets the next lane from half a vehicle length before a
+    lane's end on (as ``follow_road`` switches); within ``switch_time`` [s] of that point, both
+    lanes (the turn rate was set a simulation frame before the measurement). The body heading is
+    $\theta$ less the slip angle that $\omega$ implies."""
     from highway_env.vehicle.controller import ControlledVehicle
 
     x, y, theta, v, omega = (float(c) for c in measurement)
