@@ -17,7 +17,7 @@ import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents import RMPC, SMPC, Policy, SolveReport
 from agents.mpc import fallback, guesses
 from agents.mpc.nlp.budget import Budget, CallTimes
-from agents.mpc.nlp.solver import SolverSettings
+from agents.mpc.nlp.settings import SolverSettings
 from risk_env import Scenario, make_estimator, predict_array
 from risk_env import observation as ob
 from risk_env.risk.estimators import signed_box_distance

@@ -15,7 +15,7 @@ import pytest
 
 import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents import RMPC, SMPC
-from agents.mpc.nlp.solver import SolverSettings
+from agents.mpc.nlp.settings import SolverSettings
 from risk_env import Scenario
 from risk_env.risk.severity import make_severity
 from risk_env.scenario.scenario import MAX_MASS, RISK_BOUNDS

@@ -1,5 +1,5 @@
 """Solving one NLP within a step's time budget: the warm start, and one solver call per initial
-guess, each at the largest rung (:meth:`agents.mpc.nlp.solver.SolverSettings.rung_limits`) that fits the
+guess, each at the largest rung (:meth:`agents.mpc.nlp.settings.SolverSettings.rung_limits`) that fits the
 time left, until one converges (or, for an episode's first step, every guess ran and the plan of
 least cost is kept)."""
 

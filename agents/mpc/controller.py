@@ -19,16 +19,11 @@ from agents.mpc.hooks import RiskForm
 from agents.mpc.measure import FREE_MARGIN
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.calls import call_solver
+from agents.mpc.nlp.compiled import DEFAULT_JIT_CACHE
 from agents.mpc.nlp.ocp import STAGE_COSTS, problem_key, soft_variant
 from agents.mpc.nlp.parameters import parameter_vector
-from agents.mpc.nlp.solver import (
-    DEFAULT_JIT_CACHE,
-    SOLVERS,
-    Problem,
-    SolverSettings,
-    build_problem,
-    cached_problem,
-)
+from agents.mpc.nlp.settings import SOLVERS, SolverSettings
+from agents.mpc.nlp.solver import Problem, build_problem, cached_problem
 from agents.mpc.objects import MODE_THRESHOLD, Slots, check_slots, check_threshold, combine
 from agents.mpc.step import FEASIBLE_SLACK, MANOEUVRE_TIME, SOFT_SHARE, Step, StepContext, StepInput
 from risk_env import checks
@@ -181,7 +176,7 @@ class PathFollowingMPC(RiskForm):
             rungs=RUNGS if math.isfinite(self.max_solve_time) else 1,
             soft_penalty=soft_penalty,
         )
-        """How the NLP is solved (:class:`agents.mpc.nlp.solver.SolverSettings`)."""
+        """How the NLP is solved (:class:`agents.mpc.nlp.settings.SolverSettings`)."""
         self.backoff = float(backoff)
         self.cold_starts = cold_starts
         self.seed = seed

@@ -54,7 +54,8 @@ from agents.mpc.attempts import Call, Guess, Tally
 from agents.mpc.fallback import feasible_action
 from agents.mpc.nlp.budget import Budget
 from agents.mpc.nlp.ocp import soft_variant, variable_bounds
-from agents.mpc.nlp.solver import Problem, SolverSettings
+from agents.mpc.nlp.settings import SolverSettings
+from agents.mpc.nlp.solver import Problem
 from risk_env.models.path import lateral_offset
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import WorstCaseRisk

@@ -1,5 +1,5 @@
 """The real-time bound of an MPC step: a wall-time budget shared by its solver calls, and the choice
-of the solver rung (:meth:`agents.mpc.nlp.solver.SolverSettings.rung_limits`) that fits what is left.
+of the solver rung (:meth:`agents.mpc.nlp.settings.SolverSettings.rung_limits`) that fits what is left.
 
 IPOPT stops itself at its ``max_wall_time``; fatrop (CasADi 3.8) has no time limit, only
 ``max_iter``, so its calls are predicted from the measured time per iteration of the same NLP.

@@ -1,12 +1,13 @@
 """Building the MPC's solver from the NLP of :mod:`agents.mpc.nlp.ocp`: options, rungs, caches.
 
-Solvers (:data:`SOLVERS`): ``"fatrop"`` (default; stage-wise structure detected by CasADi, a
-Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact Hessian, MUMPS,
-adaptive barrier, primal-dual warm start; IPOPT's "Solved To Acceptable Level" counts as a
-success). On the paper's 36 closed loops (``python -m benchmarks.timing``, 2 cores) fatrop took a
-median / p95 of 2.1 / 4.6 ms per RMPC step against IPOPT's 6.6 / 20 ms (IPOPT spends ~2.5 ms per
-call in MUMPS and its own set-up however small the problem), and 6.3 / 23 ms per exact-SMPC step
-against 7.2 / 41 ms, neither with a failed solve. The two may settle in different local optima.
+Solvers (:data:`~agents.mpc.nlp.settings.SOLVERS`): ``"fatrop"`` (default; stage-wise structure
+detected by CasADi, a Riccati-based interior point method; primal warm start) and ``"ipopt"`` (exact
+Hessian, MUMPS, adaptive barrier, primal-dual warm start; IPOPT's "Solved To Acceptable Level"
+counts as a success). On the paper's 36 closed loops (``python -m benchmarks.timing``, 2 cores)
+fatrop took a median / p95 of 2.1 / 4.6 ms per RMPC step against IPOPT's 6.6 / 20 ms (IPOPT spends
+~2.5 ms per call in MUMPS and its own set-up however small the problem), and 6.3 / 23 ms per
+exact-SMPC step against 7.2 / 41 ms, neither with a failed solve. The two may settle in different
+local optima.
 
 **Compiled solvers** (``jit=True``): the same NLP is assembled once more in MX with the stage
 functions (dynamics, pose cost, risk row) called rather than inlined, its functions (the NLP and
@@ -16,11 +17,12 @@ the derivatives the solver evaluates) generated as C by :class:`casadi.CodeGener
 library (:mod:`agents.mpc.nlp.compiled`). Nothing is written to the working directory and the process never
 changes directory.
 
-**Rungs** (:meth:`SolverSettings.rung_limits`): each NLP is built with a few solvers that differ
-only in their limits (fatrop: ``max_iter``, halved per rung; IPOPT: ``max_wall_time``, halved per
-rung), so that a call can be made to fit the time left in a step (:mod:`agents.mpc.nlp.budget`). The
-smallest rung is built first and run on the scenario's start: its time per iteration is the prior
-of the budget's estimate, and fatrop rungs that could never fit twice the step's cap are left out.
+**Rungs** (:meth:`~agents.mpc.nlp.settings.SolverSettings.rung_limits`): each NLP is built with a
+few solvers that differ only in their limits (fatrop: ``max_iter``, halved per rung; IPOPT:
+``max_wall_time``, halved per rung), so that a call can be made to fit the time left in a step
+(:mod:`agents.mpc.nlp.budget`). The smallest rung is built first and run on the scenario's start:
+its time per iteration is the prior of the budget's estimate, and fatrop rungs that could never fit
+twice the step's cap are left out.
 
 **Caches**: built problems are kept per process (:func:`cached_problem`, keyed by everything that
 changes the NLP or the solver), compiled libraries on disk.
@@ -29,7 +31,6 @@ changes the NLP or the solver), compiled libraries on disk.
 from __future__ import annotations
 
 import math
-import os
 import time
 import warnings
 from collections import OrderedDict
@@ -42,13 +43,12 @@ import numpy as np
 
 from agents.mpc.nlp.budget import CallTimes
 from agents.mpc.nlp.calls import BoundPattern, BoundPatternError, bound_pattern
-from agents.mpc.nlp.compiled import DEFAULT_JIT_CACHE, compiled_library, have_c_compiler
+from agents.mpc.nlp.compiled import compiled_library, have_c_compiler
 from agents.mpc.nlp.ocp import (
     EARLY_WEIGHT,
     NU,
     NX,
     SOFT,
-    STAGE_COSTS,
     Margin,
     RiskValue,
     assemble,
@@ -56,124 +56,15 @@ from agents.mpc.nlp.ocp import (
     variable_bounds,
 )
 from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
-from risk_env import checks
+from agents.mpc.nlp.settings import SolverSettings
 from risk_env.models.path import project
 from risk_env.scenario.scenario import Scenario
 
-SOLVERS: tuple[str, ...] = ("fatrop", "ipopt")
 USEFUL_RUNG = 2.0
 """A fatrop rung is built when its iterations at the prior time per iteration take at most this
 many step caps (a larger one could never fit the time left in a step)."""
 _CACHE_SIZE = 48
 _SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
-
-
-@dataclass(frozen=True)
-class SolverSettings:
-    """How the NLP is solved; see :class:`agents.PathFollowingMPC` for each field."""
-
-    solver: str = "fatrop"
-    stage_cost: str = "reached"
-    jit: bool = False
-    jit_opt: int = 1
-    jit_cache: str | os.PathLike[str] | None = DEFAULT_JIT_CACHE
-    tol: float = 1e-4
-    max_iter: int = 150
-    warm_start: bool = True
-    solver_options: dict[str, Any] = field(default_factory=dict)
-    time_limit: float | None = None
-    """The wall-time cap of a step [s] (None: none): IPOPT's own ``max_wall_time`` at the largest
-    rung; for fatrop (no time limit) it decides which rungs are worth building."""
-    rungs: int = 1
-    """Rungs of the ladder: rung r limits a call to ``max_iter // 2**r`` iterations (fatrop) or
-    ``time_limit / 2**r`` seconds (IPOPT), so that a call fits the time left in a step."""
-    soft_penalty: float = 1e4
-    r"""$\rho$ of the soft variants' exact L1 penalty $\sum_n \rho\, q^{N - n} s_n$ ($q$ =
-    ``EARLY_WEIGHT``) [cost per margin unit] (:mod:`agents.mpc.nlp.ocp`)."""
-
-    def __post_init__(self) -> None:
-        if self.solver not in SOLVERS:
-            raise ValueError(f"unknown solver {self.solver!r}; expected one of {SOLVERS}")
-        if self.stage_cost not in STAGE_COSTS:
-            raise ValueError(f"unknown stage_cost {self.stage_cost!r}; expected one of {STAGE_COSTS}")
-        # numbers of any real type (numpy's too), stored as Python's
-        object.__setattr__(self, "max_iter", checks.integer("max_iter", self.max_iter, minimum=1))
-        object.__setattr__(self, "tol", checks.positive("tol", self.tol))
-        object.__setattr__(self, "rungs", checks.integer("rungs", self.rungs, minimum=1))
-        if self.time_limit is not None:
-            limit = checks.real("time_limit", self.time_limit)
-            if not limit > 0:
-                raise ValueError(f"time_limit must be > 0 [s] (or None), got {self.time_limit!r}")
-            object.__setattr__(self, "time_limit", limit)
-        object.__setattr__(self, "soft_penalty", checks.positive("soft_penalty", self.soft_penalty))
-
-    def key(self) -> tuple[Any, ...]:
-        """What of the settings changes a built solver (not where compiled code is kept)."""
-        options = repr(sorted(self.solver_options.items()))
-        return (
-            self.solver,
-            self.stage_cost,
-            self.jit,
-            self.jit_opt,
-            self.tol,
-            self.max_iter,
-            self.warm_start,
-            options,
-            self.time_limit,
-            self.rungs,
-            self.soft_penalty,
-        )
-
-    def rung_limits(self) -> tuple[tuple[int, float | None], ...]:
-        """``(max_iter, max_wall_time [s] or None)`` of each rung, the largest first."""
-        out = []
-        for r in range(self.rungs):
-            iterations = max(1, self.max_iter >> r) if self.solver == "fatrop" else self.max_iter
-            wall = None if self.time_limit is None or self.solver != "ipopt" else self.time_limit / 2**r
-            out.append((iterations, wall))
-        return tuple(out)
-
-    def plugin_options(self, rung: int = 0) -> dict[str, Any]:
-        """The nlpsol plugin's options (IPOPT's or fatrop's) at ``rung``, the user's on top."""
-        max_iter, wall = self.rung_limits()[rung]
-        extra = {k: v for k, v in self.solver_options.items() if k not in SOLVERS}
-        if self.solver == "ipopt":
-            ipopt = {
-                "print_level": 0,
-                "sb": "yes",
-                "tol": self.tol,
-                "constr_viol_tol": 1e-6,
-                "acceptable_tol": max(1e-3, 10 * self.tol),
-                "acceptable_constr_viol_tol": 1e-5,
-                "acceptable_iter": 5,
-                "max_iter": max_iter,
-                "mu_strategy": "adaptive",
-                "hessian_approximation": "exact",
-            }
-            if self.warm_start:
-                ipopt.update(
-                    warm_start_init_point="yes",
-                    warm_start_bound_push=1e-6,
-                    warm_start_mult_bound_push=1e-6,
-                    mu_init=1e-3,
-                )
-            if wall is not None:
-                ipopt["max_wall_time"] = wall
-            ipopt.update(self.solver_options.get("ipopt", {}))
-            return {"ipopt": ipopt, **extra}
-        # CasADi 3.8's fatrop takes a primal initial guess only (no warm_start_* options); a small
-        # initial barrier and bound push suit that guess, the shifted previous solution
-        fatrop = {
-            "print_level": 0,
-            "tol": self.tol,
-            "constr_viol_tol": 1e-6,
-            "max_iter": max_iter,
-            "mu_init": 1e-3 if self.warm_start else 1e-1,
-            "bound_push": 1e-6 if self.warm_start else 1e-2,
-            "bound_frac": 1e-6 if self.warm_start else 1e-2,
-        }
-        fatrop.update(self.solver_options.get("fatrop", {}))
-        return {"structure_detection": "auto", "fatrop": fatrop, **extra}
 
 
 @dataclass(frozen=True)
