@@ -147,3 +147,73 @@ def test_the_sweep_keeps_each_finished_job_in_the_store(tmp_path):
         run_sweep(_fail_on_three, [1, 2, 3, 4], workers=1, store=store, desc="demo")
     assert len(store) == 2 and store.get("demo/1") == 4
     assert run_sweep(abs, [1, 2, -3, -4], workers=2, store=store, desc="demo") == [1, 4, 3, 4]
+
+
+def _interrupt_second(module, name: str, monkeypatch) -> list:
+    """Make ``module.name`` (a sweep's job function) raise on its second call, once."""
+    job, calls, cut = getattr(module, name), [], [True]
+
+    def interrupted(*args, **kwargs):
+        calls.append(args[0])
+        if len(calls) == 2 and cut and cut.pop():
+            raise Interrupt("power cut")
+        return job(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, interrupted)
+    return calls
+
+
+@pytest.mark.parametrize(
+    ("command", "job", "argv", "table"),
+    [
+        ("stress", "run_job", ["--scenes", "2", "--agents", "rmpc", "--max-solve-time", "inf"], "stress.csv"),
+        pytest.param(
+            "highway_intersection",
+            "run_chunk",
+            ["--agents", "idm", "--episodes", "6", "--duration", "1"],
+            "intersection_episodes.csv",
+            marks=pytest.mark.slow,  # the same chunk store as stress and sampled, in a heavier env
+        ),
+    ],
+)
+def test_every_long_sweep_resumes_to_the_uninterrupted_results(
+    tmp_path, monkeypatch, command, job, argv, table
+):
+    """``stress`` and ``highway_intersection`` (``heldout``, ``highway_frontier`` and ``prediction``
+    share the same chunk store): interrupted after one chunk, ``--resume`` runs only the rest and
+    writes the rows an uninterrupted run writes."""
+    if command == "highway_intersection":
+        pytest.importorskip("highway_env")
+    module = __import__(f"benchmarks.{command}", fromlist=["main"])
+    argv = [*argv, "--workers", "1"]
+    module.main([*argv, "--out", str(tmp_path / "clean")])
+    calls = _interrupt_second(module, job, monkeypatch)
+    out = tmp_path / "resumed"
+    with pytest.raises(Interrupt):
+        module.main([*argv, "--out", str(out)])
+    calls.clear()
+    module.main([*argv, "--out", str(out), "--resume"])
+    assert len(calls) == 1  # the first chunk was not run again
+    assert _rows(out / table) == _rows(tmp_path / "clean" / table)
+
+
+@pytest.mark.slow
+def test_train_ppo_seeds_resume_to_the_uninterrupted_results(tmp_path, monkeypatch):
+    """``train_ppo --seeds``: an interrupted run keeps its finished seeds; ``--resume`` trains only
+    the others and ships the same seed with the same table."""
+    pytest.importorskip("stable_baselines3")
+    from benchmarks import ppo_eval, train_ppo
+
+    argv = ["--total-timesteps", "384", "--n-steps", "128", "--num-envs", "3", "--seeds", "2"]
+    argv += ["--eval-episodes", "1", "--no-progress-bar", "--name", "tiny"]
+    train_ppo.main([*argv, "--out", str(tmp_path / "clean")])
+    calls = _interrupt_second(ppo_eval, "evaluate", monkeypatch)
+    out = tmp_path / "resumed"
+    with pytest.raises(Interrupt):
+        train_ppo.main([*argv, "--out", str(out)])
+    calls.clear()
+    train_ppo.main([*argv, "--out", str(out), "--resume"])
+    assert len(calls) == 1  # seed 0 kept
+    clean = json.loads((tmp_path / "clean" / "tiny_seeds.json").read_text())
+    resumed = json.loads((out / "tiny_seeds.json").read_text())
+    assert resumed["best"] == clean["best"] and resumed["results"] == clean["results"]
