@@ -21,7 +21,6 @@ was rejected with a named error or whose episode raised.
 from __future__ import annotations
 
 import argparse
-import csv
 import functools
 import math
 import os
@@ -31,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.output import OutputSet
+from benchmarks.output import OutputSet, write_csv
 from benchmarks.scenes import Scene
 from benchmarks.sweep import default_workers, run_sweep
 
@@ -330,14 +329,8 @@ def run_family(args: argparse.Namespace, scenes: list[Scene], out: OutputSet) ->
         rows = run_sweep(run, settings, args.workers, args.ray, desc="cap settings", store=out.store)
         wall = time.perf_counter() - t0
         summary = [summarise(g, [r for r in rows if r["group"] == g]) for g in args.agents]
-        for name, columns, table in (
-            ("cap.csv", ROW_COLUMNS, rows),
-            ("cap_summary.csv", SUMMARY_COLUMNS, summary),
-        ):
-            with (out.dir / name).open("w", newline="") as f:
-                writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-                writer.writeheader()
-                writer.writerows(table)
+        write_csv(out.dir / "cap.csv", ROW_COLUMNS, rows)
+        write_csv(out.dir / "cap_summary.csv", SUMMARY_COLUMNS, summary)
         workers = args.workers or default_workers()
         where = f"{os.cpu_count()} cores, " + (
             "a Ray cluster" if args.ray is not False else f"{workers} worker(s)"

@@ -394,3 +394,13 @@ class OutputSet:
         }
         self.manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
         return manifest
+
+
+def write_csv(path: Path, columns: Iterable[str], rows: Iterable[dict[str, Any]]) -> None:
+    """``rows`` as CSV at ``path`` under the header ``columns`` (keys outside it are left out)."""
+    import csv
+
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(columns), extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)

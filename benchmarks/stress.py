@@ -27,7 +27,6 @@ step's cap (iterations past the rung's limit, calls over twice the cap in wall a
 from __future__ import annotations
 
 import argparse
-import csv
 import gc
 import os
 import time
@@ -39,6 +38,7 @@ import numpy as np
 
 from benchmarks import cap_family, cli
 from benchmarks.agent_names import AgentName, parse_agent
+from benchmarks.output import write_csv
 from benchmarks.scenes import Scene, infeasible_step, make_scenes, object_truth, witness_clearance
 from benchmarks.sweep import default_workers, run_sweep
 
@@ -358,14 +358,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         rows = run_sweep(run_job, jobs, args.workers, args.ray, desc="stress episodes", store=out.store)
         wall = time.perf_counter() - t0
         summary = [summarise(a, [r for r in rows if r["agent"] == a]) for a in args.agents]
-        for name, columns, table in (
-            ("stress.csv", EPISODE_COLUMNS, rows),
-            ("stress_summary.csv", SUMMARY_COLUMNS, summary),
-        ):
-            with (out.dir / name).open("w", newline="") as f:
-                writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
-                writer.writeheader()
-                writer.writerows(table)
+        write_csv(out.dir / "stress.csv", EPISODE_COLUMNS, rows)
+        write_csv(out.dir / "stress_summary.csv", SUMMARY_COLUMNS, summary)
         workers = args.workers or default_workers()
         where = "a Ray cluster" if args.ray is not False else f"{workers} worker process(es)"
         text = markdown(summary, rows, out.command_line.strip(), wall, where)
