@@ -165,6 +165,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         summary, rows, wall = run(args, out)
         write_csvs(out.dir, "frontier", summary, rows)
         text = markdown(summary, args, wall, out.command_line.strip()) + verdicts(summary)
+        # the tables as a section that a docs page can include (the figure's path is this folder's)
+        text = f"<!-- --8<-- [start:tables] -->\n{text}<!-- --8<-- [end:tables] -->\n"
         text += "\n![frontier](frontier.png)\n"
         (out.dir / "frontier.md").write_text(text)
         title = (
