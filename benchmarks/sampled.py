@@ -26,7 +26,7 @@ The PPO policies read $\epsilon$ in J, so their rows are the paper severity's on
 $\epsilon = 0$ and the SMPC agents run the budget rows only.
 
     python -m benchmarks.sampled --agents rmpc:worst_case,smpc:exact --severities probability \
-        --budgets 0.05,0.01 --episodes 1000 --out docs/results/budget
+        --budgets 0.05,0.01 --episodes 200 --out docs/results/budget
 """
 
 from __future__ import annotations
