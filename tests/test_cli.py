@@ -330,6 +330,7 @@ def test_a_bad_value_of_any_flag_fails_naming_it_and_touches_no_file(case, tmp_p
         ("highway_render", ["--seed", "-1"], "--seed"),
         ("sampled", ["--workers", "-1"], "--workers"),
         ("stress", ["--workers", "0"], "--workers"),
+        ("stress", ["--agents", ""], "--agents"),  # once ran the default agents
         ("vector_speed", ["--max-wrapped", "-1"], "--max-wrapped"),
         ("table2", ["--agents", ""], "--agents"),
         ("table2", ["--methods", ""], "--methods"),
