@@ -8,6 +8,7 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 # a solver call past its rung's iteration limit raises (agents.mpc.nlp.calls), here and in worker processes
 os.environ.setdefault("RISKCROSSING_STRICT_ITERATIONS", "1")
 
+import doc_blocks  # noqa: E402  (tests/doc_blocks.py)
 import pytest  # noqa: E402
 
 from risk_env.scenario.scenario import Scenario  # noqa: E402
@@ -17,3 +18,12 @@ from risk_env.scenario.scenario import Scenario  # noqa: E402
 def short_scenario() -> Scenario:
     """The paper's low-uncertainty scenario with a short horizon and episode (fast tests)."""
     return Scenario.preset("low", horizon=3, max_steps=12)
+
+
+@pytest.fixture(scope="session")
+def blocks_run_alone() -> dict[str, doc_blocks.Result]:
+    """Every Python block of README.md and docs/ (but those whose optional extra is missing), each
+    run as if alone, all in one fresh interpreter (:func:`doc_blocks.run_each_alone`): code -> result."""
+    codes = [*doc_blocks.readme_python_blocks(), *doc_blocks.docs_python_blocks().values()]
+    codes = list(dict.fromkeys(c for c in codes if doc_blocks.missing_extra(c) is None))
+    return dict(zip(codes, doc_blocks.run_each_alone(codes), strict=True))
