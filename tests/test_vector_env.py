@@ -121,22 +121,22 @@ def _assert_same(a, b) -> None:
 )
 def test_batched_equals_sync(autoreset, kwargs) -> None:
     """Single envs (Python floats) == the batched env's numpy path == its one-by-one path, over
-    episodes of 25 steps (or shorter) and the resets between them."""
-    kwargs = {"max_steps": 25, **kwargs}
-    single = _run("sync", autoreset, 55, **kwargs)
-    _assert_same(single, _run("numpy", autoreset, 55, **kwargs))
-    _assert_same(single, _run("one_by_one", autoreset, 55, **kwargs))
+    episodes of 12 steps (or shorter) and the resets between them (two or more per copy)."""
+    kwargs = {"max_steps": 12, **kwargs}
+    single = _run("sync", autoreset, 28, **kwargs)
+    _assert_same(single, _run("numpy", autoreset, 28, **kwargs))
+    _assert_same(single, _run("one_by_one", autoreset, 28, **kwargs))
 
 
 @pytest.mark.parametrize("scene", ["paper", "four_crossing"])
 def test_vectorised_generators_draw_what_each_copy_draws(scene) -> None:
-    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 30, "scene": scene}
+    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 15, "scene": scene}
     if scene != "paper":
         kwargs["variations"] = Variations(object_count=True)
     for estimator in ("exact", "monte_carlo"):
-        single = _run("sync", AutoresetMode.SAME_STEP, 70, num_envs=5, risk_estimator=estimator, **kwargs)
+        single = _run("sync", AutoresetMode.SAME_STEP, 35, num_envs=5, risk_estimator=estimator, **kwargs)
         batched = _run(
-            "vectorized_rng", AutoresetMode.SAME_STEP, 70, num_envs=5, risk_estimator=estimator, **kwargs
+            "vectorized_rng", AutoresetMode.SAME_STEP, 35, num_envs=5, risk_estimator=estimator, **kwargs
         )
         _assert_same(single, batched)
 
