@@ -23,7 +23,7 @@ def short_scenario() -> Scenario:
 @pytest.fixture(scope="session")
 def blocks_run_alone() -> dict[str, doc_blocks.Result]:
     """Every Python block of README.md and docs/ (but those whose optional extra is missing), each
-    run as if alone, all in one fresh interpreter (:func:`doc_blocks.run_each_alone`): code -> result."""
+    run as if alone in this interpreter (:func:`doc_blocks.run_each_alone`): code -> result."""
     codes = [*doc_blocks.readme_python_blocks(), *doc_blocks.docs_python_blocks().values()]
     codes = list(dict.fromkeys(c for c in codes if doc_blocks.missing_extra(c) is None))
     return dict(zip(codes, doc_blocks.run_each_alone(codes), strict=True))

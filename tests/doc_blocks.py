@@ -1,15 +1,13 @@
 """The Python blocks of README.md and docs/, and how the tests run them alone.
 
 :func:`run_alone` runs one block in a fresh interpreter (the slow tests, one process per block);
-:func:`run_each_alone` runs many in one fresh interpreter (the default run), each as if alone: in
-its own namespace, from its own empty folder, its output captured, and with RiskCrossing's
-Gymnasium id unregistered before it and registered again only when the block itself imports the
-project (as a fresh interpreter registers it on ``import risk_env``, ``agents`` or ``benchmarks``),
-so a block that makes the env without that import fails here as it would alone. The interpreter's
-imports and the process-wide solver cache are shared, which is what makes it fast.
-
-Run as a script, this module reads a JSON list of blocks on stdin and writes a JSON list of
-``{"returncode", "stdout", "stderr"}`` on stdout (what :func:`run_each_alone` starts).
+:func:`run_each_alone` runs blocks in this interpreter (the default run), each as if alone: in a
+namespace of its own, from an empty folder of its own, its output captured, and with
+RiskCrossing's Gymnasium id unregistered before it and registered again only when the block itself
+imports the project (as a fresh interpreter registers it on ``import risk_env``, ``agents`` or
+``benchmarks``), so a block that makes the env without that import fails here as it would alone.
+The imports and the process-wide solver cache are shared, which is what makes it fast; the
+registry is restored afterwards.
 """
 
 from __future__ import annotations
@@ -18,7 +16,6 @@ import builtins
 import contextlib
 import importlib.util
 import io
-import json
 import os
 import re
 import subprocess
@@ -100,21 +97,16 @@ def run_alone(code: str, cwd: Path, timeout: float = 120.0) -> Result:
     return Result(done.returncode, done.stdout, done.stderr)
 
 
-def run_each_alone(codes: list[str], timeout: float = 120.0) -> list[Result]:
-    """Each of ``codes`` as if alone (see the module's docstring), all in one fresh interpreter."""
-    with tempfile.TemporaryDirectory(prefix="blocks_") as cwd:
-        done = subprocess.run(
-            [sys.executable, str(Path(__file__).resolve())],
-            input=json.dumps(codes),
-            cwd=cwd,
-            env=_environment(),
-            capture_output=True,
-            text=True,
-            timeout=timeout * max(1, len(codes)),
-        )
-    if done.returncode != 0:
-        raise RuntimeError(f"the block runner failed ({done.returncode}):\n{done.stderr[-3000:]}")
-    return [Result(**r) for r in json.loads(done.stdout)]
+def run_each_alone(codes: list[str]) -> list[Result]:
+    """Each of ``codes`` as if alone (see the module's docstring), in this interpreter."""
+    import gymnasium
+
+    saved = dict(gymnasium.registry)
+    try:
+        return [_run_in_fresh_namespace(code) for code in codes]
+    finally:
+        gymnasium.registry.clear()
+        gymnasium.registry.update(saved)
 
 
 PACKAGES = ("risk_env", "agents", "benchmarks")
@@ -145,7 +137,7 @@ def _importing(name: str, globals=None, locals=None, fromlist=(), level: int = 0
     return module
 
 
-def _run_in_fresh_namespace(code: str) -> dict[str, object]:
+def _run_in_fresh_namespace(code: str) -> Result:
     out, err = io.StringIO(), io.StringIO()
     returncode = 0
     _forget_registrations()
@@ -162,19 +154,9 @@ def _run_in_fresh_namespace(code: str) -> dict[str, object]:
                     exec(compile(code, "<block>", "exec"), namespace)
                 except SystemExit as stop:
                     returncode = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
-                except BaseException:  # noqa: BLE001  (the block's failure is its result)
+                except Exception:  # noqa: BLE001  (the block's failure is its result)
                     traceback.print_exc()
                     returncode = 1
         finally:
             os.chdir(here)
-    return {"returncode": returncode, "stdout": out.getvalue(), "stderr": err.getvalue()}
-
-
-def main() -> None:
-    codes = json.load(sys.stdin)
-    results = [_run_in_fresh_namespace(code) for code in codes]
-    sys.stdout.write(json.dumps(results))
-
-
-if __name__ == "__main__":
-    main()
+    return Result(returncode, out.getvalue(), err.getvalue())

@@ -132,7 +132,7 @@ DOC_BLOCKS = [pytest.param(code, id=name) for name, code in doc_blocks.docs_pyth
 
 @pytest.mark.parametrize("code", DOC_BLOCKS)
 def test_every_python_block_of_the_docs_runs_alone(code, blocks_run_alone):
-    """As the README's blocks: each as if alone, all in one fresh interpreter (tests/doc_blocks.py)."""
+    """As the README's blocks: each as if alone, in this interpreter (tests/doc_blocks.py)."""
     if (module := doc_blocks.missing_extra(code)) is not None:
         pytest.skip(f"the block needs {module} (an optional extra)")
     result = blocks_run_alone[code]

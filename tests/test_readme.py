@@ -66,8 +66,8 @@ def check_block_output(index: int, result: doc_blocks.Result) -> None:
 
 @pytest.mark.parametrize("index", range(len(PYTHON_BLOCKS)))
 def test_every_python_block_runs_alone(index, blocks_run_alone):
-    """Each block in a namespace, a folder and a Gymnasium registry of its own, all the blocks in
-    one fresh interpreter (tests/doc_blocks.py); the ``slow`` test below gives each its own."""
+    """Each block in a namespace, a folder and a Gymnasium registry of its own, all in this
+    interpreter (tests/doc_blocks.py); the ``slow`` test below gives each a fresh interpreter."""
     code = PYTHON_BLOCKS[index]
     if (module := doc_blocks.missing_extra(code)) is not None:
         pytest.skip(f"the block needs {module} (an optional extra)")
