@@ -11,7 +11,12 @@ os.environ.setdefault("RISKCROSSING_STRICT_ITERATIONS", "1")
 import doc_blocks  # noqa: E402  (tests/doc_blocks.py)
 import pytest  # noqa: E402
 
+from agents.mpc.nlp import solver  # noqa: E402
 from risk_env.scenario.scenario import Scenario  # noqa: E402
+
+# The suite builds some 220 different problems, many of them in several tests far apart: the test
+# process keeps every one it built rather than the 48 a process keeps, so that each is built once.
+solver._CACHE_SIZE = 1000
 
 
 @pytest.fixture
