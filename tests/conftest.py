@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
@@ -32,3 +33,20 @@ def blocks_run_alone() -> dict[str, doc_blocks.Result]:
     codes = [*doc_blocks.readme_python_blocks(), *doc_blocks.docs_python_blocks().values()]
     codes = list(dict.fromkeys(c for c in codes if doc_blocks.missing_extra(c) is None))
     return dict(zip(codes, doc_blocks.run_each_alone(codes), strict=True))
+
+
+@pytest.fixture
+def frozen_heap():
+    """The test's own objects only, for garbage collections the code asks for (``benchmarks.stress``
+    collects before each episode): the test process holds every module the suite imported and every
+    solver it built, which a full collection would walk each time (about 0.4 s). Nothing is lost:
+    the frozen objects are collectable again after the test."""
+    gc.freeze()
+    yield
+    gc.unfreeze()
+
+
+def pytest_sessionfinish(session):
+    """The run is over: pytest's last garbage collections (five of them, to report exceptions in
+    finalizers) need not walk the whole heap of the test process again."""
+    gc.freeze()
