@@ -121,7 +121,8 @@ def test_monte_carlo_plan_respects_its_own_draws() -> None:
     """The plan's Monte Carlo risk on the solve's draws (hard indicator) stays within epsilon, up to
     the smoothed form's stated bound (draws near the disc edge, the rounded severity)."""
     scenario = Scenario.preset("medium", risk_tolerance=1000.0)
-    agent = SMPC(scenario, risk="monte_carlo", samples=200, seed=3, max_solve_time=UNCAPPED)
+    # the pilot's 40 draws (they only start the solve): the solvers of the pilot's test below
+    agent = SMPC(scenario, risk="monte_carlo", samples=200, pilot_samples=40, seed=3, max_solve_time=UNCAPPED)
     obs = start_observation(scenario)
     agent.predict(obs)
     report = agent.last_solve
