@@ -332,7 +332,9 @@ def parse_args(argv: list[str] | None = None, p: argparse.ArgumentParser | None 
             p.error(f"argument --agents: unknown group(s) {bad}; expected from {list(cap_family.GROUPS)}")
         return args
     try:
-        names = cli.agents_list(("rmpc", "smpc"))(args.agents or ",".join(DEFAULT_AGENTS))
+        names = cli.agents_list(("rmpc", "smpc"))(
+            ",".join(DEFAULT_AGENTS) if args.agents is None else args.agents
+        )
     except argparse.ArgumentTypeError as error:
         p.error(f"argument --agents: {error}")
     args.agents = [str(agent(str(a))) for a in names]

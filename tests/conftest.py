@@ -2,18 +2,51 @@
 
 from __future__ import annotations
 
+import gc
 import os
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 # a solver call past its rung's iteration limit raises (agents.mpc.nlp.calls), here and in worker processes
 os.environ.setdefault("RISKCROSSING_STRICT_ITERATIONS", "1")
 
+import doc_blocks  # noqa: E402  (tests/doc_blocks.py)
 import pytest  # noqa: E402
 
+from agents.mpc.nlp import solver  # noqa: E402
 from risk_env.scenario.scenario import Scenario  # noqa: E402
+
+# The suite builds some 220 different problems, many of them in several tests far apart: the test
+# process keeps every one it built rather than the 48 a process keeps, so that each is built once.
+solver._CACHE_SIZE = 1000
 
 
 @pytest.fixture
 def short_scenario() -> Scenario:
     """The paper's low-uncertainty scenario with a short horizon and episode (fast tests)."""
     return Scenario.preset("low", horizon=3, max_steps=12)
+
+
+@pytest.fixture(scope="session")
+def blocks_run_alone() -> dict[str, doc_blocks.Result]:
+    """Every Python block of README.md and docs/ (but those whose optional extra is missing), each
+    run as if alone in this interpreter (:func:`doc_blocks.run_each_alone`): code -> result."""
+    codes = [*doc_blocks.readme_python_blocks(), *doc_blocks.docs_python_blocks().values()]
+    codes = list(dict.fromkeys(c for c in codes if doc_blocks.missing_extra(c) is None))
+    return dict(zip(codes, doc_blocks.run_each_alone(codes), strict=True))
+
+
+@pytest.fixture
+def frozen_heap():
+    """The test's own objects only, for garbage collections the code asks for (``benchmarks.stress``
+    collects before each episode): the test process holds every module the suite imported and every
+    solver it built, which a full collection would walk each time (about 0.4 s). Nothing is lost:
+    the frozen objects are collectable again after the test."""
+    gc.freeze()
+    yield
+    gc.unfreeze()
+
+
+def pytest_sessionfinish(session):
+    """The run is over: pytest's last garbage collections (five of them, to report exceptions in
+    finalizers) need not walk the whole heap of the test process again."""
+    gc.freeze()

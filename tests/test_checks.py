@@ -135,42 +135,53 @@ def highway_envs():
     return RiskCostWrapper(continuous), RiskCostWrapper(discrete)
 
 
-@pytest.mark.parametrize(
-    ("action", "message"),
-    [
-        (np.array([np.nan, 0.0]), r"action must be finite, got array\(\[nan, +0\.\]\)"),
-        ([0.1, math.inf], r"action must be finite, got \[0\.1, inf\]"),
-        (["1", "0"], r"action .*\['1', '0'\].* with strings"),
-        ([True, False], r"action .* with bools"),
-        (np.array([0.1, 0.2, 0.3]), r"action must have shape \(2,\), got shape \(3,\)"),
-    ],
-)
+BAD_BOX_ACTIONS = [
+    (np.array([np.nan, 0.0]), r"action must be finite, got array\(\[nan, +0\.\]\)"),
+    ([0.1, math.inf], r"action must be finite, got \[0\.1, inf\]"),
+    (["1", "0"], r"action .*\['1', '0'\].* with strings"),
+    ([True, False], r"action .* with bools"),
+    (np.array([0.1, 0.2, 0.3]), r"action must have shape \(2,\), got shape \(3,\)"),
+]
+BAD_DISCRETE_ACTIONS = [
+    (7, ValueError, r"action must be an integer in \[0, 5\), got 7"),
+    (True, TypeError, "action must be an integer, got the bool True"),
+    (1.0, TypeError, r"action must be an integer .*1\.0 \(float\)"),
+    ("1", TypeError, r"action must be an integer .*'1' \(str\)"),
+    (np.array([0.1, 0.0]), TypeError, "action must be an integer"),
+]
+
+
+@pytest.mark.parametrize(("action", "message"), BAD_BOX_ACTIONS)
 def test_risk_cost_wrapper_checks_box_actions_before_highway_env(highway_envs, action, message):
     wrapper = highway_envs[0]
     wrapper.reset(seed=0)
     with pytest.raises(ValueError, match=message):
         wrapper.step(action)
-    wrapper.step(np.array([0.1, 0.0], dtype=np.float32))  # valid ones pass
-    wrapper.step([0, 0.0])
 
 
-@pytest.mark.parametrize(
-    ("action", "error", "message"),
-    [
-        (7, ValueError, r"action must be an integer in \[0, 5\), got 7"),
-        (True, TypeError, "action must be an integer, got the bool True"),
-        (1.0, TypeError, r"action must be an integer .*1\.0 \(float\)"),
-        ("1", TypeError, r"action must be an integer .*'1' \(str\)"),
-        (np.array([0.1, 0.0]), TypeError, "action must be an integer"),
-    ],
-)
+@pytest.mark.parametrize(("action", "error", "message"), BAD_DISCRETE_ACTIONS)
 def test_risk_cost_wrapper_checks_discrete_actions(highway_envs, action, error, message):
     wrapper = highway_envs[1]
     wrapper.reset(seed=0)
     with pytest.raises(error, match=message):
         wrapper.step(action)
+
+
+def test_risk_cost_wrapper_takes_valid_actions_after_refusing_bad_ones(highway_envs):
+    """Every bad action above refused, one after the other, and then the valid ones pass."""
+    continuous, discrete = highway_envs
+    continuous.reset(seed=0)
+    for action, message in BAD_BOX_ACTIONS:
+        with pytest.raises(ValueError, match=message):
+            continuous.step(action)
+    continuous.step(np.array([0.1, 0.0], dtype=np.float32))
+    continuous.step([0, 0.0])
+    discrete.reset(seed=0)
+    for action, error, message in BAD_DISCRETE_ACTIONS:
+        with pytest.raises(error, match=message):
+            discrete.step(action)
     for valid in (1, np.int64(2), np.array(3), None):  # None: highway-env's "no new action"
-        wrapper.step(valid)
+        discrete.step(valid)
 
 
 # ---------------------------------------------------------------- scenario fields

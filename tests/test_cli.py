@@ -169,13 +169,15 @@ SMALLEST = {
 }
 """The smallest episode count (and work) of each command, set on every example."""
 FAST = {
-    "python -m benchmarks.table2 --agents rmpc:worst_case,smpc:exact --uncertainty low --out results/low",
-    "python -m benchmarks.stress --scenes 20 --agents rmpc --out results/stress20",
     "python -m benchmarks.env_speed --repeat 10 --out docs/results",
     "python -m benchmarks.vector_speed --num-envs 1,8,64 --modes vector_entry_point,sync,async",
     "python -m benchmarks.rollout --agent smpc:exact --uncertainty medium --tolerance 1000",
 }
-"""The examples the default test run runs (the others are marked slow)."""
+"""The examples the default test run runs (the others are marked slow). Two more run in it as other
+tests: ``table2 --agents rmpc:worst_case,smpc:exact --uncertainty low`` at its smallest here is
+``test_table2_on_a_two_run_subset_writes_csv_md_and_figures`` (tests/test_benchmarks.py), and
+``stress --scenes 20 --agents rmpc`` is ``test_stress_benchmark_on_a_few_scenes`` (tests/test_stress.py)
+with one agent fewer (it runs rmpc and smpc on 3 scenes)."""
 
 
 def smallest(name: str, line: str, out: Path) -> list[str]:
@@ -212,9 +214,11 @@ def test_every_example_parses_and_fast_ones_are_marked():
         for name, line in examples()
     ],
 )
-def test_a_help_example_runs_as_printed(name, line, tmp_path, capsys):
+def test_a_help_example_runs_as_printed(name, line, tmp_path, capsys, request):
     if name in ("train_ppo", "ppo_study") or "ppo" in line:
         pytest.importorskip("stable_baselines3")
+    if name == "stress":
+        request.getfixturevalue("frozen_heap")  # it collects garbage before each episode
     importlib.import_module(f"benchmarks.{name}").main(smallest(name, line, tmp_path))
     assert capsys.readouterr().out.strip()
 
@@ -331,6 +335,7 @@ def test_a_bad_value_of_any_flag_fails_naming_it_and_touches_no_file(case, tmp_p
         ("highway_render", ["--seed", "-1"], "--seed"),
         ("sampled", ["--workers", "-1"], "--workers"),
         ("stress", ["--workers", "0"], "--workers"),
+        ("stress", ["--agents", ""], "--agents"),  # once ran the default agents
         ("vector_speed", ["--max-wrapped", "-1"], "--max-wrapped"),
         ("table2", ["--agents", ""], "--agents"),
         ("table2", ["--methods", ""], "--methods"),

@@ -10,25 +10,18 @@ import re
 import sys
 from pathlib import Path
 
+import doc_blocks  # tests/doc_blocks.py
 import pytest
 
 from benchmarks import summary
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
-PAGES = sorted(p for p in DOCS.rglob("*.md") if "results" not in p.relative_to(DOCS).parts)
+PAGES = doc_blocks.doc_pages()
 API_PAGES = ("risk_env.md", "highway.md", "agents.md", "benchmarks.md")
 API = "\n".join((DOCS / "api" / name).read_text() for name in API_PAGES)
 PACKAGES = ("risk_env", "risk_env.highway", "agents")
 SNIPPET = re.compile(r'^--8<-- "([^"]+)"$', re.MULTILINE)
-
-
-def run_alone(code: str, cwd: Path) -> object:
-    """``code`` in a fresh interpreter, as tests/test_readme.py runs the README's blocks."""
-    spec = importlib.util.spec_from_file_location("readme_tests", ROOT / "tests" / "test_readme.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.run_alone(code, cwd)
 
 
 @pytest.fixture(scope="module")
@@ -134,17 +127,24 @@ def test_internal_links_between_pages_resolve():
                 assert anchor in headings(linked), f"{page.name} links to a missing {target}#{anchor}"
 
 
-PYTHON_BLOCK = re.compile(r"^```python\n(.*?)^```", flags=re.DOTALL | re.MULTILINE)
-DOC_BLOCKS = [
-    pytest.param(code, id=f"{page.stem}-{i}")
-    for page in PAGES
-    for i, code in enumerate(PYTHON_BLOCK.findall(page.read_text()))
-]
+DOC_BLOCKS = [pytest.param(code, id=name) for name, code in doc_blocks.docs_python_blocks().items()]
 
 
 @pytest.mark.parametrize("code", DOC_BLOCKS)
-def test_every_python_block_of_the_docs_runs_alone(code, tmp_path):
-    result = run_alone(code, tmp_path)
+def test_every_python_block_of_the_docs_runs_alone(code, blocks_run_alone):
+    """As the README's blocks: each as if alone, in this interpreter (tests/doc_blocks.py)."""
+    if (module := doc_blocks.missing_extra(code)) is not None:
+        pytest.skip(f"the block needs {module} (an optional extra)")
+    result = blocks_run_alone[code]
+    assert result.returncode == 0, result.stderr[-3000:]
+
+
+@pytest.mark.slow  # one interpreter per block; test_every_python_block_of_the_docs_runs_alone is the fast one
+@pytest.mark.parametrize("code", DOC_BLOCKS)
+def test_every_python_block_of_the_docs_runs_alone_in_a_fresh_interpreter(code, tmp_path):
+    if (module := doc_blocks.missing_extra(code)) is not None:
+        pytest.skip(f"the block needs {module} (an optional extra)")
+    result = doc_blocks.run_alone(code, tmp_path)
     assert result.returncode == 0, result.stderr[-3000:]
 
 

@@ -1,5 +1,5 @@
-"""The PPO baseline: its fixed maps, the SB3 view of the batched env, training in a subprocess,
-loading, and the shipped policy on the paper's scenario."""
+"""The PPO baseline: its fixed maps, the SB3 view of the batched env, training (in this process;
+in a subprocess in the slow tests), loading, and the shipped policy on the paper's scenario."""
 
 from __future__ import annotations
 
@@ -146,8 +146,13 @@ def test_sb3_view_reports_episode_cost_and_terminal_observation() -> None:
         SB3VecEnv(gym.make_vec(risk_env.ENV_ID, num_envs=2))
 
 
+SMALL_RUN = ("--num-envs", "4", "--n-steps", "32", "--batch-size", "64", "--no-progress-bar")
+"""Rollouts of 4 copies x 32 steps = 128 env steps, one update (two minibatches) after each."""
+
+
 def _train(tmp_path: Path, *flags: str, steps: int = 1024) -> dict:
-    """Train in a subprocess for ``steps`` env steps (8 copies, rollouts of 64 steps each)."""
+    """Train with ``python -m benchmarks.train_ppo`` in a subprocess for ``steps`` env steps (8
+    copies, rollouts of 64 steps each)."""
     out = tmp_path / "ppo"
     command = [
         sys.executable,
@@ -165,18 +170,35 @@ def _train(tmp_path: Path, *flags: str, steps: int = 1024) -> dict:
     return json.loads((out / "model.json").read_text())
 
 
-def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
-    """One short training (the prediction features, the Lagrangian): saved, loaded, acting; told
-    epsilon and the level of the scenario it is loaded for, in the severity it was trained with.
-    The cost is above the limit, so beta grows by dual ascent (two rollouts, one update each)."""
+@pytest.fixture
+def keep_torch_threads():
+    """Training sets torch's thread count (benchmarks.train_ppo): the test process gets its own back."""
+    import torch
+
+    threads = torch.get_num_threads()
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_train_save_load_predict(tmp_path: Path, capsys, keep_torch_threads) -> None:
+    """One short training (the prediction features, the Lagrangian) through the command's ``main``
+    in this process (torch already loaded; the ``slow`` tests below train with ``python -m`` in a
+    subprocess): saved, loaded, acting; told epsilon and the level of the scenario it is loaded
+    for, in the severity it was trained with. The cost is above the limit, so beta grows by dual
+    ascent (two rollouts, one update each)."""
+    from benchmarks import train_ppo
+
     lagrangian = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")
-    meta = _train(tmp_path, "--checkpoint-every", "512", "--prediction", *lagrangian)
-    assert meta["timesteps"] >= 1024 and meta["steps_per_s"] > 0
+    argv = ["--out", str(tmp_path / "ppo"), "--total-timesteps", "256", *SMALL_RUN]
+    train_ppo.main([*argv, "--checkpoint-every", "128", "--prediction", *lagrangian])
+    assert "env steps/s including updates" in capsys.readouterr().out
+    meta = json.loads((tmp_path / "ppo" / "model.json").read_text())
+    assert meta["timesteps"] >= 256 and meta["steps_per_s"] > 0
     assert meta["final_rollout"]["beta"] > 2.0 + 1.0  # each update adds dual_lr (cost - limit) >= 1
     assert meta["features"] == FeatureSpec(prediction=True).size
-    assert list((tmp_path / "ppo" / "model_checkpoints").glob("model_*_steps.zip"))
+    assert len(list((tmp_path / "ppo" / "model_checkpoints").glob("model_*_steps.zip"))) == 2
     agent = PPOAgent.load(tmp_path / "ppo" / "model.zip")
-    assert agent.metadata["args"]["num_envs"] == 8
+    assert agent.metadata["args"]["num_envs"] == 4
     obs, _ = gym.make(risk_env.ENV_ID).reset(seed=0)
     action, state = agent.predict(obs)
     assert action.shape == (2,) and state is None and np.all(np.isfinite(action))
@@ -192,7 +214,7 @@ def test_train_save_load_predict_in_a_subprocess(tmp_path: Path) -> None:
         PPOAgent.load(tmp_path / "ppo" / "model.zip", scenario=other.unwrapped.scenario)
 
 
-@pytest.mark.slow  # test_train_save_load_predict_in_a_subprocess trains with the same flags
+@pytest.mark.slow  # test_train_save_load_predict trains with these flags (in this process)
 def test_lagrangian_raises_beta_above_the_cost_limit(tmp_path: Path) -> None:
     """One rollout (beta moves after every rollout): the cost is above the limit, the penalty grows."""
     flags = ("--lagrangian", "--cost-limit", "-1", "--dual-lr", "1", "--risk-weight", "2")

@@ -421,7 +421,12 @@ def check_agent_action(scenario: Scenario, action: np.ndarray, obs: np.ndarray) 
     assert abs(float(action[1]) - w_last) <= ego.omega_rate_max * dt + 1e-5, (action, w_last)
 
 
-AGENTS = {"RMPC": lambda s: RMPC(s), "SMPC": lambda s: SMPC(s, risk="exact")}
+AGENTS = {
+    "RMPC": lambda s: RMPC(s, max_solve_time=math.inf),
+    "SMPC": lambda s: SMPC(s, risk="exact", max_solve_time=math.inf),
+}
+"""No wall-time cap: the actions' limits hold for every plan and every fallback, and a busy machine
+must not decide which of them acts (the cap's own tests are in tests/test_cap.py)."""
 
 
 def agents_in_closed_loop(name: str, scenario: Scenario, seed: int) -> None:
@@ -461,8 +466,10 @@ def agents_on_observations(name: str, case: tuple[Scenario, list[np.ndarray]]) -
 
 AGENT_NAMES = st.sampled_from(sorted(AGENTS))
 CLOSED_LOOPS = given(name=AGENT_NAMES, scenario=scenarios(max_steps=6, horizon=3), seed=st.integers(0, 2**16))
-test_agents_act_within_limits_in_closed_loop = fuzz(6)(CLOSED_LOOPS(agents_in_closed_loop))
-test_agents_act_within_limits_on_fuzzed_observations = fuzz(8)(
+# every example builds its agent's solvers (its scenario's structure is fuzzed too): a few here,
+# 40 each in the slow tests below
+test_agents_act_within_limits_in_closed_loop = fuzz(4)(CLOSED_LOOPS(agents_in_closed_loop))
+test_agents_act_within_limits_on_fuzzed_observations = fuzz(6)(
     given(name=AGENT_NAMES, case=agent_observations())(agents_on_observations)
 )
 test_agents_act_within_limits_in_closed_loop_long = pytest.mark.slow(

@@ -2,41 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
+import doc_blocks  # tests/doc_blocks.py
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
-BLOCKS = re.findall(r"^```(\w*)\n(.*?)^```", README, flags=re.DOTALL | re.MULTILINE)
-PYTHON_BLOCKS = [code for lang, code in BLOCKS if lang == "python"]
-OPTIONAL = {
-    "agents.ppo.policy": "stable_baselines3",
-    "PPOAgent": "stable_baselines3",
-    "risk_env.highway": "highway_env",
-}
-"""What a block mentions -> the optional module it then needs (skipped when missing)."""
-
-
-def run_alone(code: str, cwd: Path, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """``code`` in a fresh interpreter, in an empty folder, headless, this checkout importable."""
-    for needle, module in OPTIONAL.items():
-        if needle in code and importlib.util.find_spec(module) is None:
-            pytest.skip(f"the block needs {module} (an optional extra)")
-    env = {
-        **os.environ,
-        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
-        "SDL_VIDEODRIVER": "dummy",
-        "MPLBACKEND": "Agg",
-    }
-    return subprocess.run(
-        [sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout
-    )
+BLOCKS = doc_blocks.fenced_blocks(README)
+PYTHON_BLOCKS = doc_blocks.readme_python_blocks()
 
 
 def test_readme_is_under_12_kb():
@@ -77,9 +52,7 @@ def test_readme_has_quick_starts_for_the_mpc_ppo_and_highway_env():
     assert "IntersectionAdapter" in PYTHON_BLOCKS[2]
 
 
-@pytest.mark.parametrize("index", range(len(PYTHON_BLOCKS)))
-def test_every_python_block_runs_alone(index, tmp_path):
-    result = run_alone(PYTHON_BLOCKS[index], tmp_path)
+def check_block_output(index: int, result: doc_blocks.Result) -> None:
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stdout.strip(), "each block prints what it found"
     if index == 0:  # an episode's summary, not the last step's values
@@ -89,6 +62,25 @@ def test_every_python_block_runs_alone(index, tmp_path):
         lines = result.stdout.strip().splitlines()
         assert len(lines) == 2 and all("return" in line for line in lines)
         assert lines[0].startswith("PPO") and lines[1].startswith("SMPC")
+
+
+@pytest.mark.parametrize("index", range(len(PYTHON_BLOCKS)))
+def test_every_python_block_runs_alone(index, blocks_run_alone):
+    """Each block in a namespace, a folder and a Gymnasium registry of its own, all in this
+    interpreter (tests/doc_blocks.py); the ``slow`` test below gives each a fresh interpreter."""
+    code = PYTHON_BLOCKS[index]
+    if (module := doc_blocks.missing_extra(code)) is not None:
+        pytest.skip(f"the block needs {module} (an optional extra)")
+    check_block_output(index, blocks_run_alone[code])
+
+
+@pytest.mark.slow  # one interpreter per block; test_every_python_block_runs_alone is the fast one
+@pytest.mark.parametrize("index", range(len(PYTHON_BLOCKS)))
+def test_every_python_block_runs_alone_in_a_fresh_interpreter(index, tmp_path):
+    code = PYTHON_BLOCKS[index]
+    if (module := doc_blocks.missing_extra(code)) is not None:
+        pytest.skip(f"the block needs {module} (an optional extra)")
+    check_block_output(index, doc_blocks.run_alone(code, tmp_path))
 
 
 def test_readme_links_resolve():

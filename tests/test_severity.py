@@ -247,7 +247,7 @@ def test_agents_solve_with_the_injury_severity(make, estimator):
     risk within epsilon (up to the solver's tolerance on risk / scale). No wall-time cap: a busy
     machine must not turn a slow solve into a fallback."""
     epsilon = 0.004
-    scenario = Scenario.preset("medium", severity="injury", risk_tolerance=epsilon, horizon=4, max_steps=12)
+    scenario = Scenario.preset("medium", severity="injury", risk_tolerance=epsilon, max_steps=12)
     env = gym.make("RiskCrossing-v0", scenario=scenario)
     agent = make(scenario)
     obs, _ = env.reset(seed=0)

@@ -80,7 +80,7 @@ def test_infeasible_step_certifies_only_what_no_input_can_clear():
     assert not scenes.infeasible_step(low, ego, np.zeros(2), np.array([-3.5, 10.0, 0.0, 0.0, 0.0]), 1e-3)
 
 
-def test_stress_benchmark_on_a_few_scenes(tmp_path, capsys):
+def test_stress_benchmark_on_a_few_scenes(tmp_path, capsys, frozen_heap):
     summary = stress.main(
         [
             "--scenes",

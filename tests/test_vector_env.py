@@ -90,6 +90,18 @@ def _run(mode: str, autoreset: AutoresetMode, steps: int, num_envs: int = 3, **k
     return results
 
 
+def _assert_close(a, b, atol: float, err_msg: str = "") -> None:
+    """``np.testing.assert_allclose(a, b, rtol=TOL, atol=atol)``; arrays of one shape that pass
+    ``np.allclose`` (the same test, without the report) skip it: it runs thousands of times here."""
+    a, b = np.asarray(a), np.asarray(b)
+    try:
+        if a.shape == b.shape and np.allclose(a, b, rtol=TOL, atol=atol, equal_nan=True):
+            return
+    except TypeError:  # bools and objects: the full check
+        pass
+    np.testing.assert_allclose(a, b, rtol=TOL, atol=atol, err_msg=err_msg)
+
+
 def _assert_same(a, b) -> None:
     """Equal to :data:`TOL` (risks to :data:`RISK_TOL`), and the same episode ends."""
     ends = 0
@@ -100,9 +112,9 @@ def _assert_same(a, b) -> None:
                 assert fa.keys() == fb.keys()
                 for key in fa:
                     atol = RISK_TOL if "risk" in key or "cost" in key else TOL
-                    np.testing.assert_allclose(fa[key], fb[key], rtol=TOL, atol=atol, err_msg=key)
+                    _assert_close(fa[key], fb[key], atol, err_msg=key)
             else:
-                np.testing.assert_allclose(part_a, part_b, rtol=TOL, atol=RISK_TOL)
+                _assert_close(part_a, part_b, RISK_TOL)
         if len(step_a) == 5:
             ends += int(np.sum(step_a[2] | step_a[3]))
     assert ends >= 2, "the comparison should cover episode ends"
@@ -121,22 +133,22 @@ def _assert_same(a, b) -> None:
 )
 def test_batched_equals_sync(autoreset, kwargs) -> None:
     """Single envs (Python floats) == the batched env's numpy path == its one-by-one path, over
-    episodes of 25 steps (or shorter) and the resets between them."""
-    kwargs = {"max_steps": 25, **kwargs}
-    single = _run("sync", autoreset, 55, **kwargs)
-    _assert_same(single, _run("numpy", autoreset, 55, **kwargs))
-    _assert_same(single, _run("one_by_one", autoreset, 55, **kwargs))
+    episodes of 12 steps (or shorter) and the resets between them (two or more per copy)."""
+    kwargs = {"max_steps": 12, **kwargs}
+    single = _run("sync", autoreset, 28, **kwargs)
+    _assert_same(single, _run("numpy", autoreset, 28, **kwargs))
+    _assert_same(single, _run("one_by_one", autoreset, 28, **kwargs))
 
 
 @pytest.mark.parametrize("scene", ["paper", "four_crossing"])
 def test_vectorised_generators_draw_what_each_copy_draws(scene) -> None:
-    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 30, "scene": scene}
+    kwargs = {"randomize": True, "object_motion": "sampled", "max_steps": 15, "scene": scene}
     if scene != "paper":
         kwargs["variations"] = Variations(object_count=True)
     for estimator in ("exact", "monte_carlo"):
-        single = _run("sync", AutoresetMode.SAME_STEP, 70, num_envs=5, risk_estimator=estimator, **kwargs)
+        single = _run("sync", AutoresetMode.SAME_STEP, 35, num_envs=5, risk_estimator=estimator, **kwargs)
         batched = _run(
-            "vectorized_rng", AutoresetMode.SAME_STEP, 70, num_envs=5, risk_estimator=estimator, **kwargs
+            "vectorized_rng", AutoresetMode.SAME_STEP, 35, num_envs=5, risk_estimator=estimator, **kwargs
         )
         _assert_same(single, batched)
 
