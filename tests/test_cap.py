@@ -286,3 +286,22 @@ def test_the_family_keeps_every_limit(severity, level, budget, weight, seed) -> 
         options["risk_weight"] = weight / scale
     agent = SMPC.from_env(env, max_solve_time=math.inf, **options)
     assert_within_limits(run_steps(agent, env, seed=seed, steps=12))
+
+
+def test_a_monte_carlo_pilot_takes_a_budgets_bound_within_the_severitys_largest_risk() -> None:
+    """A budget of 1e6 (allowed: 1e6 scales) under the probability severity and no per-step bound
+    gives an effective bound above 1; the Monte Carlo pilot plans within 1, the largest per-step
+    probability, instead of raising (it did, in the cap family's setting 218)."""
+    env = gym.make("RiskCrossing-v0", uncertainty="high", severity="probability")
+    agent = SMPC.from_env(
+        env,
+        risk="monte_carlo",
+        samples=20,
+        pilot_samples=10,
+        risk_budget=1e6,
+        risk_tolerance=math.inf,
+        max_solve_time=math.inf,
+    )
+    obs, _ = env.reset(seed=2)
+    action, _ = agent.predict(obs)
+    assert np.all(np.isfinite(action)) and agent._pilot.risk_tolerance == 1.0

@@ -314,7 +314,8 @@ class SMPC(PathFollowingMPC):
         400 (a solve from it took longer than the rollouts), so that variant starts from them."""
         if self._pilot is None or variant != "general":
             return None
-        self._pilot.risk_tolerance = epsilon
+        # no per-step risk exceeds the severity's largest, so the bound loses nothing there
+        self._pilot.risk_tolerance = min(epsilon, self.estimator.severity.upper_bound)
         self._pilot._memory.pop(index, None)  # a cold start: every rollout, keep the best
         report = self._pilot._step(index, obs_vec)
         self._pilot.last_solve = report
