@@ -177,10 +177,14 @@ FAST_CELLS = [
     ("rmpc:grid", "high", 2500.0),
     ("smpc:exact", "medium", 1500.0),
     ("smpc:exact", "high", 0.0),
-    ("smpc:monte_carlo", "low", 500.0),
+    pytest.param("smpc:monte_carlo", "low", 500.0, marks=pytest.mark.slow),
     ("ppo:penalty", "medium", 1000.0),
 ]
-"""A few Table II configurations, one per agent and level, for the default run."""
+"""A few Table II configurations, one per agent and level, for the default run. The Monte Carlo
+SMPC's (its 500 draws make the costliest NLP of the table to build, as long as the rest of these
+cells together) runs in the slow run, as every cell does in test_the_whole_table2_is_as_committed;
+the default run checks the Monte Carlo SMPC's plans and their reproducibility in tests/test_agents.py
+(test_monte_carlo_plan_respects_its_own_draws, test_monte_carlo_draws_are_reproducible)."""
 
 
 @pytest.mark.parametrize(("agent", "level", "epsilon"), FAST_CELLS)

@@ -443,7 +443,7 @@ def test_an_observation_with_other_object_slots_is_named_so():
 def test_agents_reject_an_empty_batch_by_name(agent_name):
     import agents
 
-    agent = getattr(agents, agent_name)(Scenario.preset("low", horizon=3))
+    agent = getattr(agents, agent_name)(Scenario.preset("low", horizon=3), max_solve_time=math.inf)
     with pytest.raises(ValueError, match=r"observation is an empty batch, shape \(0, 16\)"):
         agent.predict(np.zeros((0, 16)))
 

@@ -403,6 +403,7 @@ def test_highway_benchmarks_run_small(tmp_path):
 
     tiny = ["--episodes", "1", "--duration", "3", "--predictor", "constant", "--workers", "1"]
     tiny += ["--max-solve-time", "inf", "--slots", "1"]  # the smallest MPC: the plumbing is the point
+    tiny += ["--initial-vehicles", "3"]  # and a light intersection (highway-env's steps are the cost)
     summary = highway_intersection.main([*tiny, "--agents", "rmpc,idm", "--out", str(tmp_path)])
     assert [s["agent"] for s in summary] == ["rmpc:worst_case", "idm"]
     for s in summary:

@@ -201,14 +201,18 @@ def build_problem(
         base["expand"] = not jit
 
     derivatives: dict[str, ca.Function] = {}
+    generated: dict[str, ca.Function] = {}  # fatrop's: the first rung's derivatives, for the others
 
     def make(rung: int) -> ca.Function:
-        solver = ca.nlpsol(
-            "mpc", settings.solver, oracle, {**base, **derivatives, **settings.plugin_options(rung)}
-        )
+        options = {**base, **derivatives, **settings.plugin_options(rung)}
+        if generated:
+            options["cache"] = generated
+        solver = ca.nlpsol("mpc", settings.solver, oracle, options)
         if settings.solver == "ipopt" and not jit and not derivatives:  # IPOPT's rungs share them
             names = {"grad_f": "nlp_grad_f", "jac_g": "nlp_jac_g", "hess_lag": "nlp_hess_l"}
             derivatives.update({k: solver.get_function(v) for k, v in names.items()})
+        if settings.solver == "fatrop" and not jit and not generated:  # so do fatrop's
+            generated.update(solver.cache())
         return solver
 
     # the smallest rung first: its time per iteration on the scenario's start is the prior, which
