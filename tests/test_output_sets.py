@@ -177,13 +177,15 @@ def _interrupt_second(module, name: str, monkeypatch) -> list:
     ],
 )
 def test_every_long_sweep_resumes_to_the_uninterrupted_results(
-    tmp_path, monkeypatch, command, job, argv, table
+    tmp_path, monkeypatch, request, command, job, argv, table
 ):
     """``stress`` and ``highway_intersection`` (``heldout``, ``highway_frontier`` and ``prediction``
     share the same chunk store): interrupted after one chunk, ``--resume`` runs only the rest and
     writes the rows an uninterrupted run writes."""
     if command == "highway_intersection":
         pytest.importorskip("highway_env")
+    if command == "stress":
+        request.getfixturevalue("frozen_heap")  # it collects garbage before each episode
     module = __import__(f"benchmarks.{command}", fromlist=["main"])
     argv = [*argv, "--workers", "1"]
     module.main([*argv, "--out", str(tmp_path / "clean")])
