@@ -18,6 +18,10 @@ from risk_env.scenario.scenario import Scenario  # noqa: E402
 # The suite builds some 220 different problems, many of them in several tests far apart: the test
 # process keeps every one it built rather than the 48 a process keeps, so that each is built once.
 solver._CACHE_SIZE = 1000
+# ... and with them a large heap (every module the suite imports), which each full garbage
+# collection walks: full collections a tenth as often as Python's default (every 100 collections of
+# the middle generation, not 10). Nothing is kept that would be freed, only later.
+gc.set_threshold(700, 10, 100)
 
 
 @pytest.fixture
