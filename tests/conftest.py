@@ -3,11 +3,31 @@
 from __future__ import annotations
 
 import gc
+import importlib
 import os
+import sys
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 # a solver call past its rung's iteration limit raises (agents.mpc.nlp.calls), here and in worker processes
 os.environ.setdefault("RISKCROSSING_STRICT_ITERATIONS", "1")
+
+
+def _import_without_assertion_rewriting(*names: str) -> None:
+    """Import ``names`` with pytest's assertion rewriting set aside. pytest rewrites the asserts of
+    every module of a package that ships a pytest plugin, as Hypothesis does: some 70 modules whose
+    asserts are Hypothesis's own, rewritten on every run (about a second). The tests' own modules
+    are rewritten as ever."""
+    hooks = [h for h in sys.meta_path if type(h).__module__ == "_pytest.assertion.rewrite"]
+    for hook in hooks:
+        sys.meta_path.remove(hook)
+    try:
+        for name in names:
+            importlib.import_module(name)
+    finally:
+        sys.meta_path[:0] = hooks
+
+
+_import_without_assertion_rewriting("hypothesis", "hypothesis.strategies")
 
 import doc_blocks  # noqa: E402  (tests/doc_blocks.py)
 import pytest  # noqa: E402
