@@ -1,4 +1,7 @@
-"""Shared fixtures. Rendering runs headless: SDL's video driver defaults to ``dummy``."""
+"""Shared fixtures, and the test process's settings: rendering runs headless (SDL's video driver
+defaults to ``dummy``), solver calls past their iteration limit raise, and what keeps the default run
+within its CPU budget (Hypothesis imported without assertion rewriting, every built solver kept,
+fewer full garbage collections; see README.md for the run's time)."""
 
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ os.environ.setdefault("RISKCROSSING_STRICT_ITERATIONS", "1")
 def _import_without_assertion_rewriting(*names: str) -> None:
     """Import ``names`` with pytest's assertion rewriting set aside. pytest rewrites the asserts of
     every module of a package that ships a pytest plugin, as Hypothesis does: some 70 modules whose
-    asserts are Hypothesis's own, rewritten on every run (about a second). The tests' own modules
+    asserts are Hypothesis's own, rewritten on every run (about 2 s of CPU). The tests' own modules
     are rewritten as ever."""
     hooks = [h for h in sys.meta_path if type(h).__module__ == "_pytest.assertion.rewrite"]
     for hook in hooks:
