@@ -1,13 +1,36 @@
-"""Shared fixtures. Rendering runs headless: SDL's video driver defaults to ``dummy``."""
+"""Shared fixtures, and the test process's settings: rendering runs headless (SDL's video driver
+defaults to ``dummy``), solver calls past their iteration limit raise, and what keeps the default run
+within its CPU budget (Hypothesis imported without assertion rewriting, every built solver kept,
+fewer full garbage collections; see README.md for the run's time)."""
 
 from __future__ import annotations
 
 import gc
+import importlib
 import os
+import sys
 
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 # a solver call past its rung's iteration limit raises (agents.mpc.nlp.calls), here and in worker processes
 os.environ.setdefault("RISKCROSSING_STRICT_ITERATIONS", "1")
+
+
+def _import_without_assertion_rewriting(*names: str) -> None:
+    """Import ``names`` with pytest's assertion rewriting set aside. pytest rewrites the asserts of
+    every module of a package that ships a pytest plugin, as Hypothesis does: some 70 modules whose
+    asserts are Hypothesis's own, rewritten on every run (about 2 s of CPU). The tests' own modules
+    are rewritten as ever."""
+    hooks = [h for h in sys.meta_path if type(h).__module__ == "_pytest.assertion.rewrite"]
+    for hook in hooks:
+        sys.meta_path.remove(hook)
+    try:
+        for name in names:
+            importlib.import_module(name)
+    finally:
+        sys.meta_path[:0] = hooks
+
+
+_import_without_assertion_rewriting("hypothesis", "hypothesis.strategies")
 
 import doc_blocks  # noqa: E402  (tests/doc_blocks.py)
 import pytest  # noqa: E402
@@ -18,6 +41,10 @@ from risk_env.scenario.scenario import Scenario  # noqa: E402
 # The suite builds some 220 different problems, many of them in several tests far apart: the test
 # process keeps every one it built rather than the 48 a process keeps, so that each is built once.
 solver._CACHE_SIZE = 1000
+# ... and with them a large heap (every module the suite imports), which each full garbage
+# collection walks: full collections a tenth as often as Python's default (every 100 collections of
+# the middle generation, not 10). Nothing is kept that would be freed, only later.
+gc.set_threshold(700, 10, 100)
 
 
 @pytest.fixture

@@ -627,23 +627,24 @@ def test_monte_carlo_cold_start_goes_through_the_pilot():
 
 def test_uncertainty_levels_and_tolerances_share_one_solver(monkeypatch):
     """Epsilon and the uncertainty are solver parameters: one build serves them all, and each agent
-    still plans against its own beliefs."""
+    still plans against its own beliefs (a 3-step horizon: the builds this test makes are cheap)."""
     from agents.mpc.nlp import solver as mpc
 
     # an empty cache of its own (the process's, kept for the tests after this one, comes back after)
     monkeypatch.setattr(mpc, "_SOLVER_CACHE", type(mpc._SOLVER_CACHE)())
-    first = SMPC(Scenario.preset("low", risk_tolerance=500.0), max_solve_time=UNCAPPED)
+    first = SMPC(Scenario.preset("low", risk_tolerance=500.0, horizon=3), max_solve_time=UNCAPPED)
     assert first.build_time > 0
     levels = ("medium", "high")
     others = [
-        SMPC(Scenario.preset(level, risk_tolerance=eps), max_solve_time=UNCAPPED)
+        SMPC(Scenario.preset(level, risk_tolerance=eps, horizon=3), max_solve_time=UNCAPPED)
         for level in levels
         for eps in (250.0, 1000.0)
     ]
     assert all(agent.build_time == 0.0 for agent in others)
-    zero = SMPC(Scenario.preset("low", risk_tolerance=0.0), max_solve_time=UNCAPPED)
+    zero = SMPC(Scenario.preset("low", risk_tolerance=0.0, horizon=3), max_solve_time=UNCAPPED)
     assert zero.build_time > 0  # the epsilon = 0 form
-    assert SMPC(Scenario.preset("high", risk_tolerance=0.0), max_solve_time=UNCAPPED).build_time == 0.0
+    high_zero = SMPC(Scenario.preset("high", risk_tolerance=0.0, horizon=3), max_solve_time=UNCAPPED)
+    assert high_zero.build_time == 0.0
     for agent in (first, others[1], others[3]):  # low 500, medium 1000, high 1000
         obs = start_observation(agent.scenario)
         agent.predict(obs)

@@ -272,7 +272,13 @@ def test_adapter_turn_rate_and_speed_translation():
         assert end[2] - start[2] == pytest.approx(omega * adapter.dt, abs=0.02)
 
 
-def test_smpc_and_idm_in_intersection():
+@pytest.mark.slow  # its NLPs (two slots of the lane predictor's modes) are the costliest to build here
+def test_smpc_in_intersection():
+    """The exact SMPC through the adapter with its default (lane) predictor. The default run covers
+    the parts: the adapter with an SMPC (test_an_episode_records_every_column in
+    tests/test_highway_benchmark.py), with the lane predictor (the README's intersection block and
+    test_lane_pieces_reach_the_mpcs_predictor_and_size_their_mode_slots, with the RMPC), and the SMPC
+    on a predictor's weighted modes (tests/test_mixture_planning.py)."""
     env = make_intersection_env()
     uncapped = functools.partial(SMPC, risk="exact", max_solve_time=math.inf)  # a busy machine: no fallback
     smpc = IntersectionAdapter(env, uncapped, risk_tolerance=500.0, slots=2)
@@ -281,6 +287,10 @@ def test_smpc_and_idm_in_intersection():
         action, _ = smpc.predict(obs)
         obs, *_ = env.step(action)
     assert smpc.last_solve.success
+
+
+def test_idm_in_intersection():
+    env = make_intersection_env()
     idm = IDMEgo(env)
     obs, _ = env.reset(seed=2)
     idm.predict(obs)

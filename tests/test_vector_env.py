@@ -91,14 +91,15 @@ def _run(mode: str, autoreset: AutoresetMode, steps: int, num_envs: int = 3, **k
 
 
 def _assert_close(a, b, atol: float, err_msg: str = "") -> None:
-    """``np.testing.assert_allclose(a, b, rtol=TOL, atol=atol)``; arrays of one shape that pass
-    ``np.allclose`` (the same test, without the report) skip it: it runs thousands of times here."""
+    """``np.testing.assert_allclose(a, b, rtol=TOL, atol=atol)``, which runs thousands of times
+    here: real arrays of one shape within ``|a - b| <= atol + TOL |b|`` everywhere (its test, for
+    finite numbers) pass without it; the rest (NaN, infinities, bools, a failure) go through it."""
     a, b = np.asarray(a), np.asarray(b)
-    try:
-        if a.shape == b.shape and np.allclose(a, b, rtol=TOL, atol=atol, equal_nan=True):
-            return
-    except TypeError:  # bools and objects: the full check
-        pass
+    if a.shape == b.shape and a.dtype.kind in "fiu" and b.dtype.kind in "fiu":
+        with np.errstate(invalid="ignore", over="ignore"):
+            gap = np.abs(a.astype(np.float64) - b)
+            if (gap <= atol + TOL * np.abs(b)).all() and np.isfinite(gap).all():
+                return
     np.testing.assert_allclose(a, b, rtol=TOL, atol=atol, err_msg=err_msg)
 
 
