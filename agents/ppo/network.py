@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -143,3 +144,19 @@ class PolicyNet:
             if i < len(self.activations):
                 h = scalar_map(ACTIVATIONS[self.activations[i]], h)
         return h
+
+
+def load_model(zip_path: Path) -> Any:
+    """The stable-baselines3 PPO model saved at ``zip_path``, on the CPU. Loading first builds the
+    network with fresh weights (an orthogonal initialisation: a QR per layer), which the saved ones
+    then replace: built with one torch thread, as a QR this small is over 100 times slower on two
+    threads than on one (their synchronisation); the caller's thread count is restored after."""
+    import torch
+    from stable_baselines3 import PPO
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return PPO.load(zip_path, device="cpu")
+    finally:
+        torch.set_num_threads(threads)

@@ -27,7 +27,7 @@ import numpy as np
 
 from agents.base import as_batch
 from agents.ppo.metadata import build, read_metadata
-from agents.ppo.network import LIBM, PolicyNet
+from agents.ppo.network import LIBM, PolicyNet, load_model
 from risk_env import checks
 from risk_env import observation as layout
 from risk_env.models.dynamics import unicycle_step
@@ -326,8 +326,6 @@ class PPOAgent:
         uncertainty (without a scenario: $\epsilon = 0$ and the medium level); its severity must be
         the one it was trained with, since $\epsilon$ is read in that unit.
         """
-        from stable_baselines3 import PPO
-
         if scenario is not None and not isinstance(scenario, Scenario):
             raise TypeError(
                 "scenario must be a risk_env Scenario (e.g. Scenario.preset('medium') or"
@@ -364,7 +362,7 @@ class PPOAgent:
                 )
             else:
                 context = Context(scenario.risk_tolerance, scenario.uncertainty)
-        model = PPO.load(zip_path, device="cpu")
+        model = load_model(zip_path)
         return cls(model, limits, metadata, spec, context)
 
     def reset(self) -> None:
