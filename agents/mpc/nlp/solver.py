@@ -22,7 +22,8 @@ few solvers that differ only in their limits (fatrop: ``max_iter``, halved per r
 ``max_wall_time``, halved per rung), so that a call can be made to fit the time left in a step
 (:mod:`agents.mpc.nlp.budget`). The smallest rung is built first and run on the scenario's start:
 its time per iteration is the prior of the budget's estimate, and fatrop rungs that could never fit
-twice the step's cap are left out.
+twice the step's cap are left out. An uncapped problem (``time_limit`` None) is never fitted into a
+time: it skips that run (a third of a build) and keeps every rung.
 
 **Caches**: built problems are kept per process (:func:`cached_problem`, keyed by everything that
 changes the NLP or the solver), compiled libraries on disk.
@@ -226,7 +227,10 @@ def build_problem(
     layout = (x_index, u_index, lbg, ubg, risk_shape, slack_index, slots)
     lbx, ubx = variable_bounds(scenario, x_index, u_index, len(w_tags), np.zeros(NX), slack_index)
     pattern = bound_pattern(lbx, ubx, lbg, ubg)
-    prior, failing = iteration_times(smallest, scenario, *layout, pattern=pattern)
+    if settings.time_limit is None:  # uncapped: no call is ever fitted into a time, the priors go unread
+        prior = failing = 0.0
+    else:
+        prior, failing = iteration_times(smallest, scenario, *layout, pattern=pattern)
     cap = math.inf if settings.time_limit is None else USEFUL_RUNG * settings.time_limit
     rungs = [r for r in range(len(ladder) - 1) if ladder[r][1] is not None or ladder[r][0] * failing <= cap]
     solvers = [make(r) for r in rungs] + [smallest]
