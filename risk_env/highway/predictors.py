@@ -21,10 +21,10 @@ HIGHWAY_PREDICTORS: tuple[str, ...] = PREDICTOR_NAMES
 ``"lane+interval"``."""
 
 
-def highway_predictor(predictor: str | Predictor | None, env: Any) -> Predictor | None:
+def highway_predictor(predictor: str | Predictor | None, env: Any, pieces: int = 1) -> Predictor | None:
     """The predictor named ``predictor`` for ``env``'s road network and step, an instance as is,
     or None for the paper's (``None`` or ``"constant"``); an unknown name raises ``ValueError``
-    naming it."""
+    naming it. ``pieces``: the lane predictors' P (bands along each route, one mode each)."""
     if predictor is None or isinstance(predictor, Predictor):
         return predictor
     name = checks.text("predictor", predictor, HIGHWAY_PREDICTORS)
@@ -34,8 +34,8 @@ def highway_predictor(predictor: str | Predictor | None, env: Any) -> Predictor 
 
     network, dt = unwrapped_highway(env).road.network, policy_period(env)
     if name == "lane+interval":
-        return LanePredictor(network, dt, longitudinal="interval", ego=ego_reader(env))
-    return LanePredictor(network, dt)
+        return LanePredictor(network, dt, pieces=pieces, longitudinal="interval", ego=ego_reader(env))
+    return LanePredictor(network, dt, pieces=pieces)
 
 
 def ego_reader(env: Any) -> Callable[[], np.ndarray | None]:
