@@ -31,6 +31,8 @@ from risk_env.highway.lanes.routes import Route
 from risk_env.highway.lanes.speed import reach
 from risk_env.prediction.belief import Belief
 
+CURVED = 1e-3
+"""Curvature [1/m] above which a route counts as curving (``margin_turn``)."""
 BOX_SPACING = 1.0
 """Largest spacing [m] of the centreline points that a truncation box must hold."""
 
@@ -80,6 +82,7 @@ def mode_beliefs(
     lateral_time: float,
     piece: tuple[int, int] = (0, 1),
     bounds: tuple[np.ndarray, ...] | None = None,
+    margin_turn: float = 0.0,
 ) -> Belief:
     """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
 
@@ -92,7 +95,8 @@ def mode_beliefs(
     acceleration), its mean at the band's middle (P = 1: the whole stretch around the mean).
     ``bounds``: ``(s_lo, s_hi, v_lo, v_hi)`` ``(R, N+1)`` of the mode's routes (the interval
     prediction, :func:`~risk_env.highway.lanes.interval.interval_bounds`) instead of full braking to
-    full acceleration, clipped to that full range."""
+    full acceleration, clipped to that full range; ``margin_turn`` [m] is added across where the
+    route curves at the mean."""
     steps = s.shape[1] - 1
     t = np.arange(steps + 1) * dt
     s_mean, v_mean = share @ s, share @ v
@@ -124,6 +128,7 @@ def mode_beliefs(
     c, si = np.cos(candidates)[..., None], np.sin(candidates)[..., None]
     half_x = np.abs(c * points[None, ..., 0] + si * points[None, ..., 1]).max(axis=-1)
     half_y = np.abs(c * points[None, ..., 1] - si * points[None, ..., 0]).max(axis=-1) + spread.margin_across
+    half_y = half_y + margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)[None, :]
     best = np.argmin(half_x * half_y, axis=0)  # (N+1,): the smaller box
     columns = np.arange(steps + 1)
     frame, half_x, half_y = candidates[best, columns], half_x[best, columns], half_y[best, columns]

@@ -109,9 +109,8 @@ class LanePredictor(Predictor):
             :attr:`name` is then ``"lane+interval"``).
         intervals: the interval prediction's numbers
             (:class:`~risk_env.highway.lanes.interval.IntervalModel`; ``"interval"`` only).
-        ego: ``"interval"`` only: a callable returning the ego's measurement ``(5,)`` (or None),
-            read at each prediction, so that the ego takes part in the scene as a leader and as a
-            road user to yield to (it is not predicted itself); None: the scene as given.
+        ego: ``"interval"`` only: a callable returning the ego's measurement ``(5,)`` (or None) at
+            each prediction: the ego takes part in the scene (a leader, a road user to yield to).
     """
 
     name = "lane"
@@ -392,6 +391,7 @@ class LanePredictor(Predictor):
                     self.traffic.lateral_time,
                     (j, self.pieces),
                     None if bounds is None else [b[group] for b in bounds],
+                    0.0 if bounds is None else self.intervals.margin_turn,
                 )
                 name = label if self.pieces == 1 else f"{label}#{j + 1}/{self.pieces}"
                 modes.append((total / self.pieces, beliefs, name, routes))
