@@ -95,20 +95,27 @@ def test_the_interval_boxes_are_smaller_than_and_within_the_full_range_ones(env,
         assert np.all(tight.x + tight.half_x <= wide.x + wide.half_x + 1e-9)
         assert tight.half_x[STEPS] < 0.5 * wide.half_x[STEPS]
         assert np.all(tight.v_lo >= wide.v_lo - 1e-9) and np.all(tight.v_hi <= wide.v_hi + 1e-9)
-    # the intersection's scene: every mode's box no larger than its full-range one, turns included
+    # the intersection's scene, turns included: with no turn margin every mode's box is no larger
+    # than its full-range one; the turn margin widens it across a curving route only
     road = env.unwrapped.road
     scene = np.array([vehicle_measurement(v) for v in road.vehicles])
     full = LanePredictor(road.network, T).predict_scene(scene, STEPS)
-    interval = LanePredictor(road.network, T, longitudinal="interval").predict_scene(scene, STEPS)
-    for a, b in zip(full, interval, strict=True):
-        assert [m.label for m in a] == [m.label for m in b]
-        assert [m.weight for m in a] == pytest.approx([m.weight for m in b])
-        for wide, tight in zip(a, b, strict=True):
-            area = lambda m: 4 * m.beliefs.half_x * m.beliefs.half_y  # noqa: E731
-            assert np.all(area(tight) <= area(wide) + 1e-6)
-            assert np.allclose(tight.beliefs.x, wide.beliefs.x) and np.allclose(
-                tight.beliefs.y, wide.beliefs.y
-            )
+    for margin in (0.0, IntervalModel().margin_turn):
+        intervals = IntervalModel(margin_turn=margin)
+        interval = LanePredictor(road.network, T, longitudinal="interval", intervals=intervals)
+        for a, b in zip(full, interval.predict_scene(scene, STEPS), strict=True):
+            assert [m.label for m in a] == [m.label for m in b]
+            assert [m.weight for m in a] == pytest.approx([m.weight for m in b])
+            for wide, tight in zip(a, b, strict=True):
+                assert np.allclose(tight.beliefs.x, wide.beliefs.x) and np.allclose(
+                    tight.beliefs.y, wide.beliefs.y
+                )
+                same = np.isclose(tight.beliefs.frame, wide.beliefs.frame)  # each box's frame: the smaller
+                assert np.all((tight.beliefs.half_x <= wide.beliefs.half_x + 1e-6)[same])
+                assert np.all((tight.beliefs.half_y <= wide.beliefs.half_y + margin + 1e-6)[same])
+                if margin == 0.0:
+                    area = 4 * tight.beliefs.half_x * tight.beliefs.half_y
+                    assert np.all(area <= 4 * wide.beliefs.half_x * wide.beliefs.half_y + 1e-6)
 
 
 def test_the_ego_takes_part_as_a_leader_and_is_not_predicted(straight):

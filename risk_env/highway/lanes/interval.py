@@ -17,7 +17,8 @@ every road user of the scene together (the speed model of :mod:`~risk_env.highwa
   at its coordinate on the follower's lane, and a vehicle spawned at the approach's start then
   replaces it by one far away, which no prediction sees coming, so the upper bound does without
   those leaders; nobody yields (:attr:`IntervalModel.upper_yields` False), unless asked to apply
-  the regulation's rule as the mean does;
+  the regulation's rule as the mean does; the ego (when the predictor is given one) brakes fully
+  (:attr:`IntervalModel.ego_leads`), so that no box of a road user behind it reaches through it;
 - **slow** (the lower bound): $\delta$ at the bottom of its range and the desired speed at the
   measured speed (a vehicle that does not yield never wants less than it drives), behind the
   nearest of every route hypothesis of every other road user, and yielding to any of them under
@@ -67,6 +68,11 @@ class IntervalModel:
     """Whether the fast run obeys the yielding rule (as the mean does) instead of never yielding."""
     ego_brakes: bool = True
     """Whether the ego brakes fully in the slow run (else it follows the slow IDM)."""
+    ego_leads: bool = True
+    """Whether the ego brakes fully in the fast run too (else it follows the fast IDM): a road user
+    behind the ego on its lane is then bounded behind an ego that stops, so that no box of it
+    reaches through the ego, whatever the ego plans (when the ego drives on, that road user may
+    pass its box, but behind the ego)."""
 
     def __post_init__(self) -> None:
         low, high = (float(x) for x in self.delta)
@@ -76,7 +82,7 @@ class IntervalModel:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"IntervalModel.{name} must be a finite number >= 0, got {value!r}")
-        for name in ("upper_yields", "ego_brakes"):
+        for name in ("upper_yields", "ego_brakes", "ego_leads"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"IntervalModel.{name} must be a bool, got {getattr(self, name)!r}")
 
@@ -116,7 +122,7 @@ def interval_bounds(
         target=np.full(count, np.inf),
         yielding=intervals.upper_yields,
         partners=np.flatnonzero(agents.representative),
-        braking=np.zeros(count, dtype=bool),
+        braking=ego if intervals.ego_leads else np.zeros(count, dtype=bool),
     )
     slow_s, slow_v = _run(
         model,
