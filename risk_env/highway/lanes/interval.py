@@ -25,13 +25,14 @@ every road user of the scene together (the speed model of :mod:`~risk_env.highwa
   the regulation's rule; the ego (when the predictor is given one) brakes fully.
 
 The IDM's acceleration grows with the leader's position and speed and falls with the follower's
-own position, so a follower behind its leader's upper (lower) future stays at or below (above)
-its own upper (lower) one: the two runs bound the IDM over the parameter box. The bounds on each
-step are the runs' and the mean's extremes widened by ``margin_rate`` times the time (the
-regulation's check phase, 0.5 s, is not observed, nor is the simulation's 1/16 s step; across a
-turn the box widens by ``margin_turn``), and are
-clipped to the lane predictor's full range (full braking to full acceleration), so an interval box
-always lies within the full-range one.
+own position, so a follower behind its leader's upper (lower) future tends to stay at or below
+(above) its own upper (lower) one. These are not guaranteed bounds: the IDM is not monotone in the
+follower's own speed, the yielding rule is a discrete decision on constant-speed futures, and
+vehicles spawn; the prediction benchmark measures how often they hold. The bounds on each step are
+the runs' and the mean's extremes widened by ``margin_rate`` times the time (the regulation's check
+phase, 0.5 s, is not observed, nor is the simulation's 1/16 s step), clipped to the lane
+predictor's full range (full braking to full acceleration), so that along the lane an interval box
+lies within the full-range one; across a curving route the box widens by ``margin_turn``.
 """
 
 from __future__ import annotations
