@@ -154,10 +154,10 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         if agent.budget is not None:
             options |= {"risk_budget": agent.budget, "budget_share": args.budget_share}
     pieces = getattr(args, "lane_pieces", 1)
-    if predictor == "lane" and pieces > 1:
-        from risk_env.highway import LanePredictor, policy_period
+    if predictor in ("lane", "lane+interval") and pieces > 1:
+        from risk_env.highway.predictors import highway_predictor
 
-        predictor = LanePredictor(env.unwrapped.road.network, policy_period(env), pieces=pieces)
+        predictor = highway_predictor(predictor, env, pieces=pieces)
     return IntersectionAdapter(
         env,
         Builder(functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options)),

@@ -17,7 +17,9 @@ steps later (while it is still on the road):
   level, speeds up to 40 m/s);
 - ``lane``: :class:`~risk_env.highway.LanePredictor` on the episode's road network;
 - ``lane+signal``: the same, also given each vehicle's turn signal (highway-env's
-  ``observe_intentions``: the unit vector to its destination).
+  ``observe_intentions``: the unit vector to its destination);
+- ``lane+interval``: the lane predictor with the interval prediction over highway-env's IDM
+  parameters along the lane (``longitudinal="interval"``; the ego is one of the scene's road users).
 
 Per predictor, phase (the vehicle's lane at the prediction: ``approach`` to, ``junction`` in,
 ``exit`` from the intersection; ``all`` of them) and horizon, ``prediction.csv`` holds:
@@ -53,7 +55,7 @@ from benchmarks.prediction_samples import KEYS, PHASES, STEPS, make_predictors, 
 from benchmarks.sweep import run_sweep
 from risk_env.scenario.scenario import UNCERTAINTY_PRESETS
 
-PREDICTORS = ("constant", "lane", "lane+signal")
+PREDICTORS = ("constant", "lane", "lane+signal", "lane+interval")
 """The predictors by ``--predictors`` name (module docstring)."""
 FILES = ("prediction.csv", "prediction.md")
 """The files a run writes in ``--out`` (and ``prediction.png`` unless ``--no-figures``)."""

@@ -151,6 +151,8 @@ def make_predictors(names: list[str], env: Any, uncertainty: str) -> dict[str, A
     for name in names:
         if name == "constant":
             out[name] = ConstantPredictor(highway_scenario(env, uncertainty))
+        elif name == "lane+interval":  # the ego is one of the recorded scene's road users
+            out[name] = LanePredictor(env.unwrapped.road.network, policy_period(env), longitudinal="interval")
         else:
             out[name] = LanePredictor(env.unwrapped.road.network, policy_period(env))
     return out

@@ -5,7 +5,9 @@ the horizon, a :class:`~risk_env.prediction.mixture.Mixture` of modes.
   measured, constant inputs and the scenario's uncertainty growing on the world's axes
   (:func:`risk_env.prediction.belief.predict`);
 - ``"lane"``: highway-env's lanes and routes (:class:`risk_env.highway.lanes.predictor.LanePredictor`;
-  it needs a road network, so it is built from highway-env's env, not by name alone).
+  it needs a road network, so it is built from highway-env's env, not by name alone);
+- ``"lane+interval"``: the same with the interval prediction over highway-env's IDM parameters
+  along the lane (``LanePredictor(..., longitudinal="interval")``), also built from the env.
 
 Everything that predicts takes a :class:`Predictor`: the env (its objects' one-step beliefs), the
 agents (their plans) and the benchmarks (``python -m benchmarks.prediction``).
@@ -24,8 +26,9 @@ from risk_env.prediction.mixture import Mixture
 from risk_env.scenario.parts import Uncertainty
 from risk_env.scenario.scenario import Scenario
 
-PREDICTOR_NAMES: tuple[str, ...] = ("constant", "lane")
-"""The predictors by name: the paper's and highway-env's lanes."""
+PREDICTOR_NAMES: tuple[str, ...] = ("constant", "lane", "lane+interval")
+"""The predictors by name: the paper's, highway-env's lanes, and its lanes with the interval
+prediction over the IDM's parameters."""
 
 
 class Predictor(ABC):
@@ -80,17 +83,19 @@ class ConstantPredictor(Predictor):
 
 def make_predictor(predictor: str | Predictor | None, scenario: Scenario) -> Predictor:
     """A predictor from a name of :data:`PREDICTOR_NAMES` or an instance (returned as is);
-    None: the paper's. ``"lane"`` needs highway-env's road network: build
-    :class:`risk_env.highway.lanes.predictor.LanePredictor` from the env and pass it."""
+    None: the paper's. ``"lane"`` and ``"lane+interval"`` need highway-env's road network: build
+    :class:`risk_env.highway.lanes.predictor.LanePredictor` from the env (or
+    :func:`risk_env.highway.highway_predictor`) and pass it."""
     if predictor is None:
         return ConstantPredictor(scenario)
     if isinstance(predictor, Predictor):
         return predictor
     name = checks.text("predictor", predictor, PREDICTOR_NAMES)
-    if name == "lane":
+    if name in ("lane", "lane+interval"):
+        extra = ", longitudinal='interval'" if name == "lane+interval" else ""
         raise ValueError(
-            "predictor='lane' follows highway-env's lanes and needs its road network: build"
-            " risk_env.highway.LanePredictor(env.unwrapped.road.network, risk_env.highway.policy_period(env))"
-            " and pass that instance"
+            f"predictor={name!r} follows highway-env's lanes and needs its road network: build"
+            " risk_env.highway.LanePredictor(env.unwrapped.road.network, risk_env.highway.policy_period(env)"
+            f"{extra}) and pass that instance"
         )
     return ConstantPredictor(scenario)

@@ -31,6 +31,8 @@ from risk_env.highway.lanes.routes import Route
 from risk_env.highway.lanes.speed import reach
 from risk_env.prediction.belief import Belief
 
+CURVED = 1e-3
+"""Curvature [1/m] above which a route counts as curving (``margin_turn``)."""
 BOX_SPACING = 1.0
 """Largest spacing [m] of the centreline points that a truncation box must hold."""
 
@@ -79,6 +81,8 @@ def mode_beliefs(
     a_max: float,
     lateral_time: float,
     piece: tuple[int, int] = (0, 1),
+    bounds: tuple[np.ndarray, ...] | None = None,
+    margin_turn: float = 0.0,
 ) -> Belief:
     """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
 
@@ -88,7 +92,11 @@ def mode_beliefs(
     lateral offset [m] now, ``speed`` its speed [m/s]; ``dt`` [s]; ``a_max`` [m/s^2] of full
     braking and acceleration; ``lateral_time`` [s] with which the offset decays. ``piece`` ``(j, P)``:
     the j-th of P equal bands of the reachable stretch along the route (from full braking to full
-    acceleration), its mean at the band's middle (P = 1: the whole stretch around the mean)."""
+    acceleration), its mean at the band's middle (P = 1: the whole stretch around the mean).
+    ``bounds``: ``(s_lo, s_hi, v_lo, v_hi)`` ``(R, N+1)`` of the mode's routes (the interval
+    prediction, :func:`~risk_env.highway.lanes.interval.interval_bounds`) instead of full braking to
+    full acceleration, clipped to that full range; ``margin_turn`` [m] is added across where the
+    route curves at the mean."""
     steps = s.shape[1] - 1
     t = np.arange(steps + 1) * dt
     s_mean, v_mean = share @ s, share @ v
@@ -97,6 +105,15 @@ def mode_beliefs(
     low, high = reach(speed, limit, steps, dt, a_max)
     s_lo = np.minimum(s.min(axis=0), start + low) - spread.margin_along
     s_hi = np.maximum(s.max(axis=0), start + high) + spread.margin_along
+    v_lo = np.minimum(v.min(axis=0), np.maximum(speed - a_max * t, min(speed, 0.0)))
+    v_hi = np.maximum(v.max(axis=0), np.minimum(speed + a_max * t, max(limit, speed)))
+    if bounds is not None:  # within the full range, so an interval box lies inside the full one
+        lo, hi, slow, fast = (np.asarray(b, dtype=float) for b in bounds)
+        s_lo, s_hi = (
+            np.clip(lo.min(axis=0) - spread.margin_along, s_lo, s_hi),
+            np.clip(hi.max(axis=0) + spread.margin_along, s_lo, s_hi),
+        )
+        v_lo, v_hi = np.clip(slow.min(axis=0), v_lo, v_hi), np.clip(fast.max(axis=0), v_lo, v_hi)
     j, pieces = piece
     if pieces > 1:
         band = (s_hi - s_lo) / pieces
@@ -111,6 +128,7 @@ def mode_beliefs(
     c, si = np.cos(candidates)[..., None], np.sin(candidates)[..., None]
     half_x = np.abs(c * points[None, ..., 0] + si * points[None, ..., 1]).max(axis=-1)
     half_y = np.abs(c * points[None, ..., 1] - si * points[None, ..., 0]).max(axis=-1) + spread.margin_across
+    half_y = half_y + margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)[None, :]
     best = np.argmin(half_x * half_y, axis=0)  # (N+1,): the smaller box
     columns = np.arange(steps + 1)
     frame, half_x, half_y = candidates[best, columns], half_x[best, columns], half_y[best, columns]
@@ -120,8 +138,6 @@ def mode_beliefs(
     )
     sigma_x = np.minimum(growth, half_x)
     sigma_y = np.minimum(np.minimum(spread.sigma_across, half_y), width / 2)
-    v_lo = np.minimum(v.min(axis=0), np.maximum(speed - a_max * t, min(speed, 0.0)))
-    v_hi = np.maximum(v.max(axis=0), np.minimum(speed + a_max * t, max(limit, speed)))
     sigma_v = spread.sigma_speed + spread.sigma_accel * t
     heading = route.heading(s_mean)
     return lane_belief(

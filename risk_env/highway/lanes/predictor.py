@@ -29,6 +29,11 @@ network (never a vehicle's route, destination or target lane):
   across $\sigma_{across}$ (at most the box, and at most half the lane's width); the speed's is
   $\sigma_v + \sigma_a t$ (:class:`~risk_env.highway.lanes.beliefs.Spread`) within the speeds of
   full braking and full acceleration.
+- **Interval prediction** (``longitudinal="interval"``, name ``"lane+interval"``;
+  :mod:`~risk_env.highway.lanes.interval`): along the lane the box reaches instead from the slow to
+  the fast run of highway-env's IDM over its parameter box (the exponent's range, the desired
+  speed), every road user together, within the full range; with ``ego`` the ego takes part as a
+  leader and as a road user to yield to.
 - **Off the road**: a road user farther than ``off_road`` [m] from every lane (beside it, or
   before its start or beyond its end) is predicted by ``fallback`` (the paper's constant predictor,
   one mode) and counted in :attr:`LanePredictor.fallbacks`.
@@ -37,6 +42,7 @@ network (never a vehicle's route, destination or target lane):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,6 +51,7 @@ import numpy as np
 from risk_env import checks
 from risk_env.highway.common import SPEED_BOUND
 from risk_env.highway.lanes.beliefs import Spread, mode_beliefs
+from risk_env.highway.lanes.interval import LONGITUDINAL, IntervalModel, interval_bounds, lane_only
 from risk_env.highway.lanes.routes import Route, check_lane, lane_distance, next_lanes, routes_from, wrap
 from risk_env.highway.lanes.speed import Agents, SpeedModel, TrafficModel, reach
 from risk_env.highway.lanes.table import ON_LANE_MARGIN
@@ -96,6 +103,14 @@ class LanePredictor(Predictor):
         fallback: the predictor of road users off the road (default: the paper's constant
             predictor at the ``low`` level with speeds up to 40 m/s, as
             :func:`risk_env.highway.highway_scenario`).
+        pieces: P, each route's stretch along the lane split into P bands, one mode each.
+        longitudinal: ``"reach"`` (full braking to full acceleration) or ``"interval"`` (the IDM
+            over its parameter box, :mod:`~risk_env.highway.lanes.interval`; the predictor's
+            :attr:`name` is then ``"lane+interval"``).
+        intervals: the interval prediction's numbers
+            (:class:`~risk_env.highway.lanes.interval.IntervalModel`; ``"interval"`` only).
+        ego: ``"interval"`` only: a callable returning the ego's measurement ``(5,)`` (or None) at
+            each prediction: the ego takes part in the scene (a leader, a road user to yield to).
     """
 
     name = "lane"
@@ -111,6 +126,9 @@ class LanePredictor(Predictor):
         off_road: float = 2.0,
         fallback: Predictor | None = None,
         pieces: int = 1,
+        longitudinal: str = "reach",
+        intervals: IntervalModel | None = None,
+        ego: Callable[[], Any] | None = None,
     ) -> None:
         if not (hasattr(road_network, "graph") and hasattr(road_network, "get_closest_lane_index")):
             raise TypeError(
@@ -141,7 +159,23 @@ class LanePredictor(Predictor):
         if not isinstance(fallback, Predictor):
             raise TypeError(f"fallback must be a Predictor, got {checks.describe(fallback)}")
         self.fallback = fallback
+        self.longitudinal = checks.text("longitudinal", longitudinal, LONGITUDINAL)
+        if longitudinal == "interval":
+            self.name = "lane+interval"
+        elif intervals is not None or ego is not None:
+            raise ValueError(
+                f"intervals and ego need longitudinal='interval', got longitudinal={longitudinal!r}"
+            )
+        self.intervals = IntervalModel() if intervals is None else intervals
+        if not isinstance(self.intervals, IntervalModel):
+            raise TypeError(f"intervals must be an IntervalModel or None, got {checks.describe(intervals)}")
+        if ego is not None and not callable(ego):
+            raise TypeError(
+                f"ego must be a callable returning a measurement, or None, got {checks.describe(ego)}"
+            )
+        self.ego = ego
         self.speed_model = SpeedModel(road_network, self.traffic)
+        self._lane_model = lane_only(self.speed_model) if longitudinal == "interval" else None
         self._routes: dict[tuple, Route] = {}
         self._turns: dict[tuple, str] = {}
         self._next: dict[tuple, list] = {}
@@ -151,7 +185,8 @@ class LanePredictor(Predictor):
         """How many road users were predicted, since construction."""
 
     def __repr__(self) -> str:
-        return f"LanePredictor(dt={self.dt}, traffic={self.traffic}, weights={self.weights})"
+        extra = f", intervals={self.intervals}" if self.longitudinal == "interval" else ""
+        return f"LanePredictor(dt={self.dt}, traffic={self.traffic}, weights={self.weights}{extra})"
 
     # ------------------------------------------------------------------ interface
     def predict(self, measurement: Any, steps: int, lane: Any = None, signal: Any = None) -> Mixture:
@@ -181,6 +216,11 @@ class LanePredictor(Predictor):
         steps = checks.integer("steps", steps, minimum=0)
         lanes = self._per_user("lanes", lanes, len(rows))
         signals = self._per_user("signals", signals, len(rows))
+        users = len(rows)
+        ego = None if self.ego is None else self.ego()
+        if ego is not None:  # the ego takes part in the scene, predicted for nobody
+            ego = np.asarray(checks.finite_reals("the ego's measurement", ego, 5), dtype=float)
+            rows, lanes, signals = np.vstack([rows, ego]), [*lanes, None], [*signals, None]
         lanes = [None if lane is None else check_lane(self.network, lane) for lane in lanes]
         along, across = self.speed_model.table.locate(rows[:, :2])
         hypotheses = [
@@ -191,17 +231,27 @@ class LanePredictor(Predictor):
         ]
         agents = self._agents(rows, hypotheses)
         s, v = self.speed_model.run(agents, steps, self.dt) if len(agents.vehicle) else (None, None)
+        bounds = None
+        if self.longitudinal == "interval" and len(agents.vehicle):
+            is_ego = agents.vehicle == users if ego is not None else None
+            bounds = interval_bounds(
+                self.speed_model, agents, steps, self.dt, self.intervals, (s, v), is_ego, self._lane_model
+            )
         out: list[Mixture] = []
         first = 0
-        self.predicted += len(rows)
-        for row, hyp in zip(rows, hypotheses, strict=True):
+        self.predicted += users
+        for row, hyp in zip(rows[:users], hypotheses[:users], strict=True):
             if hyp is None:
                 self.fallbacks += 1
                 out.append(self.fallback.predict(row, steps))
                 continue
-            count = len(hyp.routes)
-            out.append(self._mixture(row, hyp, s[first : first + count], v[first : first + count]))
-            first += count
+            part = slice(first, first + len(hyp.routes))
+            out.append(
+                self._mixture(
+                    row, hyp, s[part], v[part], None if bounds is None else [b[part] for b in bounds]
+                )
+            )
+            first += len(hyp.routes)
         return out
 
     # ------------------------------------------------------------------ hypotheses
@@ -314,8 +364,11 @@ class LanePredictor(Predictor):
         )
 
     # ------------------------------------------------------------------ beliefs
-    def _mixture(self, row: np.ndarray, hyp: _Hypotheses, s: np.ndarray, v: np.ndarray) -> Mixture:
-        """The road user's modes from its routes' arc lengths and speeds ``(R, N+1)``."""
+    def _mixture(
+        self, row: np.ndarray, hyp: _Hypotheses, s: np.ndarray, v: np.ndarray, bounds: list | None
+    ) -> Mixture:
+        """The road user's modes from its routes' arc lengths and speeds ``(R, N+1)`` (and their
+        interval bounds, :func:`~risk_env.highway.lanes.interval.interval_bounds`, or None)."""
         modes = []
         for group, label in zip(hyp.groups, hyp.labels, strict=True):
             w = hyp.weights[group]
@@ -337,6 +390,8 @@ class LanePredictor(Predictor):
                     self.traffic.max_acceleration,
                     self.traffic.lateral_time,
                     (j, self.pieces),
+                    None if bounds is None else [b[group] for b in bounds],
+                    0.0 if bounds is None else self.intervals.margin_turn,
                 )
                 name = label if self.pieces == 1 else f"{label}#{j + 1}/{self.pieces}"
                 modes.append((total / self.pieces, beliefs, name, routes))
