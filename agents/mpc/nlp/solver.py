@@ -63,8 +63,22 @@ from risk_env.scenario.scenario import Scenario
 USEFUL_RUNG = 2.0
 """A fatrop rung is built when its iterations at the prior time per iteration take at most this
 many step caps (a larger one could never fit the time left in a step)."""
-_CACHE_SIZE = 48
+_CACHE_SIZE = 128
 _SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
+
+
+@dataclass
+class CacheCounts:
+    """How the process-wide cache (:func:`cached_problem`) answered since the process started:
+    problems built (misses) and problems found (hits). A step that built nothing leaves
+    ``builds`` as it was (what :meth:`agents.PathFollowingMPC.prepare` is for)."""
+
+    builds: int = 0
+    hits: int = 0
+
+
+CACHE_COUNTS = CacheCounts()
+"""The process's :class:`CacheCounts`."""
 
 
 @dataclass(frozen=True)
@@ -140,10 +154,13 @@ class Problem:
 
 def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Problem:
     """The process-wide problem under ``key``, built by ``build()`` on a miss (``build_time`` 0 on a
-    hit); the least recently used of more than 48 are dropped."""
+    hit); the least recently used of more than 128 are dropped (an SMPC at the intersection warms up
+    about 60: :meth:`agents.PathFollowingMPC.prepare`). Counted in :data:`CACHE_COUNTS`."""
     if key in _SOLVER_CACHE:
         _SOLVER_CACHE.move_to_end(key)
+        CACHE_COUNTS.hits += 1
         return replace(_SOLVER_CACHE[key], build_time=0.0)
+    CACHE_COUNTS.builds += 1
     problem = build()
     _SOLVER_CACHE[key] = problem
     while len(_SOLVER_CACHE) > _CACHE_SIZE:
