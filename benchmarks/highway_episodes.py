@@ -6,7 +6,8 @@ the outcome (collision and its kind, goal, timeout, deadlock, whether the ego le
 every lane of highway-env's map, ``vehicle.on_road`` false, at some step's end) and per-step
 arrays (the scored risk, each MPC step's wall and CPU time, whether every object slot was
 occupied, whether the step built an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`)
-with the episode risk an SMPC with a budget spent by its own estimator.
+with the episode risk an SMPC with a budget spent by its own estimator and the steps whose fallback
+was a manoeuvre (the rest of the fallback steps applied a soft plan).
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
@@ -100,6 +101,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         driver.reset()
     base = env.unwrapped
     risks, walls, cpus, full, builds = [], [], [], [], []
+    manoeuvres = 0
     times, speeds = [float(base.time)], [float(base.vehicle.speed)]
     off_road = 0
     done, kind = False, ""
@@ -111,6 +113,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
             walls.append(sum(r.solve_time for r in reports))
             cpus.append(sum(r.cpu_time for r in reports))
             full.append(len(driver.last_objects) >= slots)
+            manoeuvres += any(getattr(r, "fallback", None) == "manoeuvre" for r in reports)
             constructed = getattr(getattr(driver, "make_agent", None), "built", set())
             builds.append(bool(built_problems() - known - constructed))
         before = _states(base)
@@ -147,6 +150,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "built": np.array(builds, dtype=bool),
         "mpc_steps": len(walls),
         "fallbacks": int(getattr(driver, "failures", 0)),
+        "manoeuvres": manoeuvres,
         "spent_risk": float(spent),
     }
 
