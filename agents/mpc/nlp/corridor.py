@@ -34,17 +34,11 @@ CORRIDOR_WEIGHT = 1.0
 r"""A corridor slack of 1 m at any stage costs this many times $\rho\, q^N$ (:func:`corridor_weight`)."""
 
 
-def corridor_weight(N: int, n: int) -> float:
-    r"""The cost of a corridor slack of 1 m at stage $n$ over $\rho$: :data:`CORRIDOR_WEIGHT` $q^N$ at
-    every stage ($q$ = :data:`agents.mpc.nlp.ocp.EARLY_WEIGHT`), more than a risk slack of one margin
-    unit costs at any stage (at most $(1 + $ ``NEAR_WEIGHT`` $)\, q^{N-1}$)."""
-    from agents.mpc.nlp.ocp import EARLY_WEIGHT  # the slacks' one weight; ocp imports this module
-
-    return CORRIDOR_WEIGHT * EARLY_WEIGHT**N
-
-
-CORRIDOR_SLACK = 2
-"""The component of a corridor slack's tag ``(n, "s", 2)`` (0: the risk rows', 1: the budget's)."""
+def corridor_weight(N: int, q: float) -> float:
+    r"""The cost of a corridor slack of 1 m at any stage over $\rho$: :data:`CORRIDOR_WEIGHT` $q^N$
+    ($q$: the risk slacks' early weight, :data:`agents.mpc.nlp.ocp.EARLY_WEIGHT`), more than a risk
+    slack of one margin unit costs at any stage (at most $(1 + $ ``NEAR_WEIGHT`` $)\, q^{N-1}$)."""
+    return CORRIDOR_WEIGHT * q**N
 
 
 def corridor_rows(offset: Any, width: float, slack: Any = None) -> list[tuple[Any, float, float]]:

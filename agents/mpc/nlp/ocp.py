@@ -338,7 +338,7 @@ def assemble(
                 add_g(r, lo, hi, n, "corridor")
                 for r, lo, hi in corridor_rows(offset, sc.path.corridor, SC.get(n))
             ]
-        return soft_penalty * corridor_weight(N, n) * SC[n] if n in SC else 0.0
+        return soft_penalty * corridor_weight(N, EARLY_WEIGHT) * SC[n] if n in SC else 0.0
 
     def add_accumulator(n: int) -> None:
         r"""$c_{n+1} = c_n + \nu R_n$ ($c_1 = 0$, $\nu$ the normaliser), the gap row's last component:

@@ -265,7 +265,7 @@ def build_problem(
     soft_corridor = [slacks[g_tags[i][0], "s", CORRIDOR_SLACK] for i in corridor_rows if slacks]
 
     def weight(tag: tuple[int, str, int]) -> float:  # a slack's cost over rho: the risk's, the corridor's
-        return corridor_weight(N, tag[0]) if tag[2] == CORRIDOR_SLACK else EARLY_WEIGHT ** (N - tag[0])
+        return corridor_weight(N, EARLY_WEIGHT) if tag[2] == CORRIDOR_SLACK else EARLY_WEIGHT ** (N - tag[0])
 
     return Problem(
         variant=variant,
