@@ -1,12 +1,12 @@
 r"""The MPC's last resort and its safety clip: a family of rate-limited manoeuvres, the choice of the
 safest one, and the clip that keeps every applied action within the input bounds and rate limits.
 
-The family (:data:`MANOEUVRES`): each of four speed targets (brake to 0, hold the current speed,
-accelerate to $v_{max}$, reverse to $v_{min}$) with each of three turn targets (straight, full left, full
-right), every target approached as fast as the rate limits allow; and, with a corridor about the path
-(``path.corridor`` finite), each speed target **following the path** (pure pursuit of the path point
-a few metres ahead, :func:`agents.mpc.guesses.pursuit`): on a curved lane no straight or full-lock
-member stays on the road, a path follower does.
+The family (:data:`MANOEUVRES`, then :data:`FOLLOWERS`): each of four speed targets (brake to 0,
+hold the current speed, accelerate to $v_{max}$, reverse to $v_{min}$) with each of three turn targets
+(straight, full left, full right), every target approached as fast as the rate limits allow; and,
+with a corridor about the path (``path.corridor`` finite), each speed target **following the path**
+(pure pursuit of the path point a few metres ahead, :func:`agents.mpc.guesses.pursuit`): on a
+curved lane no straight or full-lock member stays on the road, a path follower does.
 
 :func:`safest` ranks them by the agent's own risk first (the longer the predicted risk stays within
 $\epsilon$, the safer), then **by the corridor** (the longer the ego centre stays within the step's
@@ -34,11 +34,11 @@ SPEEDS: tuple[str, ...] = ("brake", "hold", "accelerate", "reverse")
 TURNS: tuple[str, ...] = ("", "left", "right")
 FOLLOW = "path"
 """The turn "target" of the family members that follow the path (only with a finite corridor)."""
-MANOEUVRES: tuple[str, ...] = tuple(f"{s}_{t}" if t else s for s in SPEEDS for t in TURNS) + tuple(
-    f"{s}_{FOLLOW}" for s in SPEEDS
-)
-"""Names of the family, e.g. ``"brake"``, ``"accelerate_left"``, ``"reverse_right"``, ``"brake_path"``
-(the last four only with a finite corridor)."""
+MANOEUVRES: tuple[str, ...] = tuple(f"{s}_{t}" if t else s for s in SPEEDS for t in TURNS)
+"""Names of the family, e.g. ``"brake"``, ``"accelerate_left"``, ``"reverse_right"``."""
+FOLLOWERS: tuple[str, ...] = tuple(f"{s}_{FOLLOW}" for s in SPEEDS)
+"""Names of the path followers, e.g. ``"brake_path"``: in the family after :data:`MANOEUVRES` with a
+finite corridor."""
 
 
 def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) -> np.ndarray:

@@ -41,6 +41,10 @@ def corridor_weight(N: int, q: float) -> float:
     return CORRIDOR_WEIGHT * q**N
 
 
+CORRIDOR_SLACK = 2
+"""The component of a corridor slack's tag ``(n, "s", 2)`` (0: the risk rows', 1: the budget's)."""
+
+
 def corridor_rows(offset: Any, width: float, slack: Any = None) -> list[tuple[Any, float, float]]:
     """``(row, lower, upper)`` of one stage: the lateral ``offset`` [m] within ``width`` [m]; with a
     ``slack`` (a soft variant) the two one-sided rows softened by it."""
