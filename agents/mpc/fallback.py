@@ -9,7 +9,7 @@ with a corridor about the path (``path.corridor`` finite), each speed target **f
 curved lane no straight or full-lock member stays on the road, a path follower does.
 
 :func:`safest` ranks them by the agent's own risk first (the longer the predicted risk stays within
-$\epsilon$, the safer), then **by the corridor** (the longer the ego centre stays within the step's
+$\epsilon$, the safer), then **by the corridor** (the fewer stages the ego centre spends outside the
 corridor about the path, the better: a manoeuvre that leaves the road counts against it, but never
 outweighs the risk), then by the worst-case clearance (the distance from the ego disc to the object's
 truncation box) at the first step where the risk exceeds $\epsilon$ (the less it is violated, the
@@ -78,7 +78,7 @@ def safest(risk: np.ndarray, clearance: np.ndarray, epsilon: float, outside: np.
     r"""Index of the safest manoeuvre: risk ``(M, N)`` by the agent's own estimator and worst-case
     clearance ``(M, N)`` [m] at the states $n = 1, \dots, N$; ``outside`` ``(M, N)``: whether state $n$ lies
     outside the corridor (None: none does). Ranked by the first step whose risk exceeds $\epsilon$ (later
-    is safer; never is safest), then by the first step outside the corridor (later is better), then
+    is safer; never is safest), then by the number of stages outside the corridor (fewer is better), then
     by the clearance at the risk's first step, then by the smallest clearance over n (larger is safer);
     ties go to the earlier manoeuvre of the family."""
     risk, clearance = np.asarray(risk, float), np.asarray(clearance, float)
@@ -90,7 +90,7 @@ def safest(risk: np.ndarray, clearance: np.ndarray, epsilon: float, outside: np.
     clearance = np.nan_to_num(clearance, nan=-np.inf)
     exceeds = ~(risk <= epsilon * (1.0 + 1e-9) + 1e-9)  # NaN counts as exceeding
     first = np.where(exceeds.any(axis=1), exceeds.argmax(axis=1), risk.shape[1])
-    leaves = np.where(outside.any(axis=1), outside.argmax(axis=1), risk.shape[1])
+    leaves = risk.shape[1] - outside.sum(axis=1)  # stages inside
     rows = np.arange(len(risk))
     at_first = np.where(first < risk.shape[1], clearance[rows, np.minimum(first, risk.shape[1] - 1)], np.inf)
     return int(np.lexsort((-clearance.min(axis=1), -at_first, -leaves, -first))[0])
@@ -104,13 +104,12 @@ def choose(
     worsts: Sequence[object],
     futures: Sequence[object | None],
     epsilon: float,
-    corridor: float,
 ) -> tuple[str, np.ndarray]:
     r"""``(name, inputs (N, NU))`` of the :func:`safest` manoeuvre from the state ``x0`` ``(NX,)``:
     ``rollout(inputs)`` gives the states ``(N+1, NX)`` from it, ``risk(ego (N, 4))`` the agent's own risk
     ``(N,)`` over the present objects, ``worsts[k]`` slot k's worst-case estimator (the clearance to
-    the nearest truncation box of ``futures[k]``, the slot's beliefs or None), ``corridor`` the step's
-    half width [m] about the path."""
+    the nearest truncation box of ``futures[k]``, the slot's beliefs or None); the corridor: the
+    path's."""
     family = manoeuvres(scenario, x0)
     states = np.stack([rollout(u)[1:] for u in family.values()])
     ego = states[:, :, [0, 1, 2, 4]]  # pose of state n with the speed v_{n-1} that led there
@@ -120,7 +119,7 @@ def choose(
         if f is not None:
             worst = worsts[k]
             clearance = np.minimum(clearance, worst.distance(ego, f) - worst.radius)
-    outside = None
+    outside, corridor = None, scenario.path.corridor
     if math.isfinite(corridor):
         outside = np.abs(lateral_offset(scenario.path, states[..., 0], states[..., 1])) > corridor
     name = list(family)[safest(risks, clearance, epsilon, outside)]

@@ -54,11 +54,10 @@ from agents.mpc.attempts import Call, Guess, Tally
 from agents.mpc.fallback import feasible_action
 from agents.mpc.nlp.bounds import variable_bounds
 from agents.mpc.nlp.budget import Budget
-from agents.mpc.nlp.corridor import step_bounds
+from agents.mpc.nlp.corridor import step_bounds, step_widths
 from agents.mpc.nlp.ocp import soft_variant
 from agents.mpc.nlp.settings import SolverSettings
 from agents.mpc.nlp.solver import Problem
-from risk_env.models.path import lateral_offset
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import WorstCaseRisk
 from risk_env.scenario.scenario import Scenario
@@ -264,7 +263,7 @@ class Step:
         ctx, t0 = self.context, time.perf_counter()
         risk = lambda ego: ctx.risk(ego, self.futures, self.data)  # noqa: E731
         rollout = functools.partial(guesses.rollout, self.base, self.x0)
-        args = (risk, ctx.worsts, self.futures, ctx.epsilon, self.corridor())
+        args = (risk, ctx.worsts, self.futures, ctx.epsilon)
         choice = fallback.choose(ctx.scenario, self.x0, rollout, *args)
         self.manoeuvre_time = max(MANOEUVRE_TIME, 2.0 * (time.perf_counter() - t0))
         return choice
@@ -292,29 +291,28 @@ class Step:
         )
         return {"lbx": lbx, "ubx": ubx, "lbg": self.lbg(pr), "ubg": self.ubg(pr), "p": self.p}
 
-    def corridor(self) -> float:
-        """The corridor's half width [m] for this step: the path's, or for an ego that starts
-        outside it its own offset plus :data:`CORRIDOR_REENTRY` (so that the start alone never makes
-        the problem infeasible)."""
-        path = self.context.scenario.path
-        offset = abs(float(lateral_offset(path, self.x0[0], self.x0[1])))
-        return path.corridor if offset <= path.corridor else offset + CORRIDOR_REENTRY
+    def corridor_bounds(self, pr: Problem) -> tuple[np.ndarray, np.ndarray]:
+        """The corridor rows' ``(lower, upper)`` bounds: :func:`agents.mpc.nlp.corridor.step_widths`
+        (an ego outside the corridor gets :data:`CORRIDOR_REENTRY` more)."""
+        x, y = self.x0[0], self.x0[1]
+        width = step_widths(self.context.scenario, x, y, pr.soft, pr.variant == "free", CORRIDOR_REENTRY)
+        rows = pr.corridor_rows
+        return step_bounds(pr.lbg[rows], pr.ubg[rows], width[[pr.g_tags[i][0] - 1 for i in rows]])
 
     def lbg(self, pr: Problem) -> np.ndarray:
         """The rows' lower bounds, the risk rows' at the back-off."""
         lbg = pr.lbg.copy()
         lbg[pr.risk_rows] = self.context.backoff
-        rows = pr.corridor_rows
-        if rows.size:
-            lbg[rows] = step_bounds(pr.lbg[rows], pr.ubg[rows], self.corridor())[0]
+        if pr.corridor_rows.size:
+            lbg[pr.corridor_rows] = self.corridor_bounds(pr)[0]
         return lbg
 
     def ubg(self, pr: Problem) -> np.ndarray:
-        """The rows' upper bounds (the corridor's as :meth:`corridor`)."""
+        """The rows' upper bounds (the corridor's as :meth:`corridor_bounds`)."""
         if not pr.corridor_rows.size:
             return pr.ubg
-        ubg, rows = pr.ubg.copy(), pr.corridor_rows
-        ubg[rows] = step_bounds(pr.lbg[rows], pr.ubg[rows], self.corridor())[1]
+        ubg = pr.ubg.copy()
+        ubg[pr.corridor_rows] = self.corridor_bounds(pr)[1]
         return ubg
 
     def guesses(

@@ -17,8 +17,8 @@ r"""The path's corridor in the NLP: the planned ego centre keeps within $\pm c$ 
   problem failed the fallback's manoeuvres, which knew no corridor, left the road
   (:mod:`agents.mpc.fallback` now ranks by it).
 
-A step sets the bound $c$ (widened for an ego that starts outside it:
-:meth:`agents.mpc.step.Step.corridor`) on the finite side of each row; the rows' infinite sides stay,
+A step sets the bound $c$ (widened for an ego that starts outside it: :func:`step_widths`) on the
+finite side of each row; the rows' infinite sides stay,
 so the split into equalities and inequalities every call keeps does not change
 (:mod:`agents.mpc.nlp.calls`).
 """
@@ -29,6 +29,8 @@ import math
 from typing import Any
 
 import numpy as np
+
+from risk_env.models.path import lateral_offset
 
 CORRIDOR_WEIGHT = 1.0
 r"""A corridor slack of 1 m at any stage costs this many times $\rho\, q^N$ (:func:`corridor_weight`)."""
@@ -56,10 +58,28 @@ def corridor_rows(offset: Any, width: float, slack: Any = None) -> list[tuple[An
 def step_bounds(
     nominal_lbg: np.ndarray, nominal_ubg: np.ndarray, width: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The corridor rows' bounds at a step's half ``width`` [m]: on each row's finite sides."""
+    """The corridor rows' bounds at a step's half ``width`` [m] (a number or one per row): on each
+    row's finite sides."""
     lower = np.where(np.isfinite(nominal_lbg), -width, -np.inf)
     upper = np.where(np.isfinite(nominal_ubg), width, np.inf)
     return lower, upper
+
+
+def step_widths(scenario: Any, x: float, y: float, soft: bool, free: bool, reentry: float) -> np.ndarray:
+    r"""The corridor's half widths [m] at $n = 1, \dots, N$ for an ego at ``(x, y)`` [m]: the path's;
+    for an ego that starts outside it, in a hard variant, its offset plus ``reentry`` (so that the
+    start alone never makes the problem infeasible), narrowing to the path's at $n = N$ where there
+    are risk rows (a constant widening let each plan edge further out: at the intersection the lanes'
+    boxes pushed the ego off the road half a metre a step), constant in the ``free`` problem (which
+    has no soft variant). A ``soft`` variant keeps the path's: its slacks pay for the start."""
+    path, N = scenario.path, scenario.horizon
+    offset = abs(float(lateral_offset(path, x, y)))
+    if offset <= path.corridor or soft:
+        return np.full(N, path.corridor)
+    wide = offset + reentry
+    if free:
+        return np.full(N, wide)
+    return path.corridor + (wide - path.corridor) * (1.0 - np.arange(1, N + 1) / N)
 
 
 def fill_slacks(problem: Any, w: np.ndarray, g: np.ndarray, lbg: np.ndarray, push: float) -> np.ndarray:
