@@ -7,7 +7,8 @@ every lane of highway-env's map, ``vehicle.on_road`` false, at some step's end) 
 arrays (the scored risk, each MPC step's wall and CPU time, whether every object slot was
 occupied, whether the step built an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`)
 with the episode risk an SMPC with a budget spent by its own estimator and the steps whose fallback
-was a manoeuvre (the rest of the fallback steps applied a soft plan).
+was a manoeuvre (the rest of the fallback steps applied a soft plan), and the CPU time of the
+driver's reset (where the adapter builds its agents' NLPs, before the episode's first step).
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
@@ -24,6 +25,7 @@ stopped (speed below :data:`STOPPED_SPEED`) at every step's end over its last
 from __future__ import annotations
 
 import argparse
+import time
 from typing import Any
 
 import numpy as np
@@ -97,8 +99,10 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     from risk_env.highway.adapter import reached
 
     obs, _ = env.reset(seed=seed)
+    cpu_start = time.process_time()
     if hasattr(driver, "reset"):
-        driver.reset()
+        driver.reset()  # the adapter prepares its agents here: every NLP of the route
+    reset_cpu = time.process_time() - cpu_start
     base = env.unwrapped
     risks, walls, cpus, full, builds = [], [], [], [], []
     manoeuvres = 0
@@ -151,6 +155,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "mpc_steps": len(walls),
         "fallbacks": int(getattr(driver, "failures", 0)),
         "manoeuvres": manoeuvres,
+        "reset_cpu_s": reset_cpu,
         "spent_risk": float(spent),
     }
 

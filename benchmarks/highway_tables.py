@@ -27,7 +27,8 @@ RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout",
 EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
     "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road", "off_road_steps", "final_speed",
-    "risk_mean", "fallbacks", "manoeuvres", "spent_risk", "solve_ms_median", "cpu_ms_median", "build_steps",
+    "risk_mean", "fallbacks", "manoeuvres", "reset_cpu_s", "spent_risk", "solve_ms_median", "cpu_ms_median",
+    "build_steps",
 )  # fmt: skip
 """The columns of the per-episode CSV."""
 
