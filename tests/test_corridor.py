@@ -119,16 +119,17 @@ def test_a_box_on_the_lane_gets_a_soft_plan_that_keeps_to_the_lane(make):
     assert offsets[math.inf].max() > 2.0
 
 
-def test_the_fallback_ranks_leaving_the_corridor_after_the_risk():
-    """Equal risk: the manoeuvre that stays in the corridor longer wins over one with more
-    clearance; but a manoeuvre whose risk stays within epsilon longer wins whatever the corridor."""
+def test_the_fallback_ranks_the_corridor_first_then_the_risk():
+    """The manoeuvre that spends fewer stages outside the corridor wins, over more clearance and over
+    a risk that stays within epsilon longer; among equals the risk decides, then the clearance."""
     risk = np.zeros((2, 4))
     clearance = np.array([[5.0, 5.0, 5.0, 5.0], [1.0, 1.0, 1.0, 1.0]])
     outside = np.array([[False, True, True, True], [False, False, False, False]])
     assert fallback.safest(risk, clearance, 0.0) == 0
     assert fallback.safest(risk, clearance, 0.0, outside) == 1
-    risk[1, 1:] = 1.0  # the one in the corridor meets the risk at n = 2
-    assert fallback.safest(risk, clearance, 0.0, outside) == 0
+    risk[1, 1:] = 1.0  # the one in the corridor meets the risk at n = 2: it still wins
+    assert fallback.safest(risk, clearance, 0.0, outside) == 1
+    assert fallback.safest(risk, clearance, 0.0, np.zeros_like(outside)) == 0  # equals: the risk
     with pytest.raises(ValueError, match="outside"):
         fallback.safest(risk, clearance, 0.0, outside[:, :2])
 
