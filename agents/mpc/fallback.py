@@ -17,9 +17,10 @@ the horizon $n = 1, \dots, N$. So the MPC never brakes blindly: among the manoeu
 lane, braking is chosen only when no other keeps clear of the object longer, or by more. The
 corridor comes first as in the soft problem, where a metre outside it costs more than any risk
 slack (:mod:`agents.mpc.nlp.corridor`). Measured at the intersection with the default wall-time cap
-(``python -m benchmarks.highway_intersection --episodes 5 --agents rmpc``): ranked after the risk, the manoeuvres escaped the boxes sideways
-and the ego left the road in 5 of 5 episodes; ranked first, in none. Without a corridor every
-manoeuvre stays "within" it, and the ranking is the risk's and the clearance's alone.
+(``python -m benchmarks.highway_intersection --episodes 5 --agents rmpc``): ranked after the
+risk, the manoeuvres escaped the boxes sideways and the ego left the road in 5 of 5 episodes; ranked
+first, in none. Without a corridor every manoeuvre stays "within" it, and the ranking is the risk's
+and the clearance's alone.
 """
 
 from __future__ import annotations
