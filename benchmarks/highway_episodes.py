@@ -6,7 +6,9 @@ the outcome (collision and its kind, goal, timeout, deadlock, whether the ego le
 every lane of highway-env's map, ``vehicle.on_road`` false, at some step's end) and per-step
 arrays (the scored risk, each MPC step's wall and CPU time, whether every object slot was
 occupied, whether the step built an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`)
-with the episode risk an SMPC with a budget spent by its own estimator.
+with the episode risk an SMPC with a budget spent by its own estimator and the steps whose fallback
+was a manoeuvre (the rest of the fallback steps applied a soft plan), and the CPU time of the
+driver's reset (where the adapter builds its agents' NLPs, before the episode's first step).
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
@@ -23,6 +25,7 @@ stopped (speed below :data:`STOPPED_SPEED`) at every step's end over its last
 from __future__ import annotations
 
 import argparse
+import time
 from typing import Any
 
 import numpy as np
@@ -96,10 +99,13 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     from risk_env.highway.adapter import reached
 
     obs, _ = env.reset(seed=seed)
+    cpu_start = time.process_time()
     if hasattr(driver, "reset"):
-        driver.reset()
+        driver.reset()  # the adapter prepares its agents here: every NLP of the route
+    reset_cpu = time.process_time() - cpu_start
     base = env.unwrapped
     risks, walls, cpus, full, builds = [], [], [], [], []
+    manoeuvres = 0
     times, speeds = [float(base.time)], [float(base.vehicle.speed)]
     off_road = 0
     done, kind = False, ""
@@ -111,6 +117,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
             walls.append(sum(r.solve_time for r in reports))
             cpus.append(sum(r.cpu_time for r in reports))
             full.append(len(driver.last_objects) >= slots)
+            manoeuvres += any(getattr(r, "fallback", None) == "manoeuvre" for r in reports)
             constructed = getattr(getattr(driver, "make_agent", None), "built", set())
             builds.append(bool(built_problems() - known - constructed))
         before = _states(base)
@@ -147,6 +154,8 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "built": np.array(builds, dtype=bool),
         "mpc_steps": len(walls),
         "fallbacks": int(getattr(driver, "failures", 0)),
+        "manoeuvres": manoeuvres,
+        "reset_cpu_s": reset_cpu,
         "spent_risk": float(spent),
     }
 

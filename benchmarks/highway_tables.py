@@ -27,7 +27,8 @@ RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout",
 EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
     "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road", "off_road_steps", "final_speed",
-    "risk_mean", "fallbacks", "spent_risk", "solve_ms_median", "cpu_ms_median", "build_steps",
+    "risk_mean", "fallbacks", "manoeuvres", "reset_cpu_s", "spent_risk", "solve_ms_median", "cpu_ms_median",
+    "build_steps",
 )  # fmt: skip
 """The columns of the per-episode CSV."""
 
@@ -62,6 +63,7 @@ def summarise(
         "fallbacks": int(fallbacks.sum()),
         "fallback_share": float(fallbacks.sum() / mpc_steps) if mpc_steps else float("nan"),
         "episodes_with_fallback": int(np.sum(fallbacks > 0)),
+        "manoeuvre_steps": int(sum(r.get("manoeuvres", 0) for r in rows)),
         "risk_mean": float(risk.mean()) if risk.size else 0.0,
     }
     for kind, times in (("cpu", cpu), ("solve", wall)):
@@ -153,14 +155,15 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         return "\n".join(lines) + "\n"
     lines += [
         "",
-        "| agent | fallback steps (share of steps; episodes with any) | episode risk: budget B, mean /"
-        " max, episodes over B (with a fallback) | solve CPU ms median / p95 / max | solve wall ms"
-        f" median / p95 / max | CPU ms, all {args.slots} slots occupied: median / p95 (steps) |"
+        "| agent | fallback steps (share of steps; episodes with any; of which manoeuvres) | episode risk:"
+        " budget B, mean / max, episodes over B (with a fallback) | solve CPU ms median / p95 / max |"
+        f" solve wall ms median / p95 / max | CPU ms, all {args.slots} slots occupied: median / p95 (steps) |"
         " steps that built an NLP (not timed) | risk per step (scored) |",
         "| " + " | ".join(["---"] * 8) + " |",
     ]
     for s in mpcs:
-        fb = f"{s['fallbacks']} ({100 * s['fallback_share']:.2f}%; {s['episodes_with_fallback']})"
+        fb = f"{s['fallbacks']} ({100 * s['fallback_share']:.2f}%; {s['episodes_with_fallback']};"
+        fb += f" {s['manoeuvre_steps']})"
         spent = (
             "-"
             if s["budget"] == ""

@@ -117,7 +117,12 @@ def test_adapter_needs_an_agent_factory_and_takes_numpy_numbers() -> None:
         IntersectionAdapter(env, RMPC, switch_ahead="2")
     uncapped = functools.partial(RMPC, max_solve_time=math.inf)
     adapter = IntersectionAdapter(
-        env, uncapped, risk_tolerance=np.float32(5.0), switch_ahead=np.float64(2.0), slots=np.int64(2)
+        env,
+        uncapped,
+        risk_tolerance=np.float32(5.0),
+        switch_ahead=np.float64(2.0),
+        slots=np.int64(2),
+        warm_up=False,  # one step: its own NLPs only (the warm-up is tests/test_warmup.py's)
     )
     assert adapter.slots == 2 and type(adapter.slots) is int
     obs, _ = env.reset(seed=0)

@@ -111,6 +111,7 @@ def test_lane_pieces_reach_the_mpcs_predictor_and_size_their_mode_slots():
     args = highway_intersection.parse_args(["--lane-pieces", "3", "--max-solve-time", "inf"])
     env = make_env(args, "lane")
     driver = make_driver(resolve("rmpc", "probability", 0.05), env, args, "lane")
+    driver.warm_up = False  # one step: its own NLPs only (the warm-up is tests/test_warmup.py's)
     obs, _ = env.reset(seed=0)
     driver.reset()
     driver.predict(obs)

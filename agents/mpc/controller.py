@@ -227,6 +227,15 @@ class PathFollowingMPC(RiskForm):
             raise TypeError("env.unwrapped.scenario is not a risk_env Scenario")
         return cls(scenario, **kwargs)
 
+    def prepare(self) -> float:
+        """Build every NLP a step can run, so that none builds one (the wall-time cap would cut it):
+        the free problem and each form a step may take (:meth:`_step_forms`), hard and soft, at every
+        row count of :meth:`agents.mpc.objects.Slots.capacities`. Returns the seconds spent building."""
+        rows, known = self._slots.capacities(self._risk_parameter_shape()[0] > 0), set(self._problems)
+        forms = [v for f in sorted(self._step_forms()) for v in (f, soft_variant(f))]
+        _ = [self._problem(v, r) for v in ("free", *forms) for r in rows]
+        return sum(p.build_time for key, p in self._problems.items() if key not in known)
+
     def reset(self, seed: int | None = None) -> None:
         """Forget warm starts and plans, zero :attr:`failures`, re-seed the generator (``seed``)."""
         self._memory.clear()
@@ -279,8 +288,10 @@ class PathFollowingMPC(RiskForm):
         return "zero" if self.ZERO_TOLERANCE_VARIANT and epsilon <= 0.0 else "general"
 
     def _problem(self, variant: str, rows: int | None = None) -> Problem:
-        """The built NLP of ``variant`` with ``rows`` rows of beliefs (default: every row)."""
-        rows = self._slots.rows if rows is None else rows
+        """The built NLP of ``variant`` with ``rows`` rows of beliefs (default: every row). Packed
+        rows: the free problem runs only when no row is active, so at one row (else: its rollout)."""
+        packed = self._slots.capacities(self._risk_parameter_shape()[0] > 0)[0] is not None
+        rows = 1 if variant == "free" and packed else self._slots.rows if rows is None else rows
         if (variant, rows) not in self._problems:
             key = (
                 type(self).__name__,

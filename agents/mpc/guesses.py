@@ -1,6 +1,6 @@
 """Initial guesses for the MPC's solver: rate-limited input ramps, simulated rollouts, and the
 cold-start candidates (brake, track the path, reverse), scored on the NLP itself. A soft variant's
-guess starts its slacks where the rollout misses the risk rows."""
+guess starts its slacks where the rollout misses the risk rows (and the corridor)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from agents.mpc.nlp import corridor
 from agents.mpc.nlp.solver import Problem
 from risk_env.models.ops import NUMPY
 from risk_env.models.path import point, timing_law
@@ -49,34 +50,43 @@ def ramp(start: float, target: float, rate: float, limit: tuple[float, float], s
     return np.array(out)
 
 
+def pursuit(scenario: Scenario, x0: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Turn rates ``(N,)`` [rad/s] that follow the path from the state ``x0`` ``(NX,)`` at the
+    speeds ``v`` ``(N,)`` [m/s]: pure pursuit of the path point a few metres ahead, within the
+    turn-rate bounds and rate limits."""
+    ego, dt, path = scenario.ego, scenario.dt, scenario.path
+    dw, w_lim = ego.omega_rate_max * dt, (-ego.omega_max, ego.omega_max)
+    omega, pose, lam, w_prev = [], x0[:3], x0[3], x0[5]
+    for vn in v:
+        px, py, _ = point(path, lam + max(4.0, 2.0 * abs(vn)))
+        bearing = math.atan2(py - pose[1], px - pose[0])
+        desired = 1.5 * float(NUMPY.wrap_angle(bearing - pose[2]))
+        w_prev = float(np.clip(np.clip(desired, w_prev - dw, w_prev + dw), *w_lim))
+        omega.append(w_prev)
+        lam = timing_law(path, lam, pose[2], vn, dt)
+        half = 0.5 * w_prev * dt
+        arc = vn * dt * float(NUMPY.sinc(half))
+        pose = np.array(
+            [
+                pose[0] + arc * math.cos(pose[2] + half),
+                pose[1] + arc * math.sin(pose[2] + half),
+                pose[2] + w_prev * dt,
+            ]
+        )
+    return np.array(omega)
+
+
 def candidates(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
     """Input sequences ``(N, NU)`` for a cold start from state ``x0`` ``(NX,)``: brake, track the
     path (pure pursuit), reverse; each within the bounds and rate limits."""
-    ego, dt, path, N = scenario.ego, scenario.dt, scenario.path, scenario.horizon
+    ego, dt, N = scenario.ego, scenario.dt, scenario.horizon
     dv, dw = ego.accel_max * dt, ego.omega_rate_max * dt
     v_lim, w_lim = (ego.v_min, ego.v_max), (-ego.omega_max, ego.omega_max)
     out = {}
     for name, v_target in (("brake", 0.0), ("track", ego.v_ref), ("reverse", ego.v_min)):
         v = ramp(x0[4], v_target, dv, v_lim, N)
-        if name == "track":  # pure pursuit of the path point a few metres ahead
-            omega, pose, lam, w_prev = [], x0[:3], x0[3], x0[5]
-            for vn in v:
-                px, py, _ = point(path, lam + max(4.0, 2.0 * abs(vn)))
-                bearing = math.atan2(py - pose[1], px - pose[0])
-                desired = 1.5 * float(NUMPY.wrap_angle(bearing - pose[2]))
-                w_prev = float(np.clip(np.clip(desired, w_prev - dw, w_prev + dw), *w_lim))
-                omega.append(w_prev)
-                lam = timing_law(path, lam, pose[2], vn, dt)
-                half = 0.5 * w_prev * dt
-                arc = vn * dt * float(NUMPY.sinc(half))
-                pose = np.array(
-                    [
-                        pose[0] + arc * math.cos(pose[2] + half),
-                        pose[1] + arc * math.sin(pose[2] + half),
-                        pose[2] + w_prev * dt,
-                    ]
-                )
-            omega = np.array(omega)
+        if name == "track":
+            omega = pursuit(scenario, x0, v)
         else:
             omega = ramp(x0[5], 0.0, dw, w_lim, N)
         out[name] = np.column_stack([v, omega, np.clip(v, *v_lim)])
@@ -105,8 +115,10 @@ def initial_point(
         np.maximum.at(per_slack, problem.row_slack, shortfall)
         w[problem.slack_index] = per_slack + SLACK_PUSH
         g[problem.risk_rows] += per_slack[problem.row_slack] + SLACK_PUSH
+    ubg = corridor.fill_slacks(problem, w, g, lbg, SLACK_PUSH)  # and the corridor's
+    if problem.slack_index.size:
         cost = float(problem.evaluate(w, p)[0])
-    violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - problem.ubg, 0.0)))
+    violation = float(np.sum(np.maximum(lbg - g, 0.0) + np.maximum(g - ubg, 0.0)))
     return w, violation, cost
 
 

@@ -51,6 +51,11 @@ class RiskForm:
         agent's, unless a budget allocates it step by step (:class:`agents.SMPC`)."""
         return self._epsilon
 
+    def _step_forms(self) -> set[str]:
+        """The risk forms (hard variants but ``"free"``) a step may run: its tolerance's
+        (:class:`agents.SMPC` with a budget: also those of the tolerances it may come down to)."""
+        return {self._risk_variant()}
+
     def _risk_data(self, futures: list[Belief | None]) -> np.ndarray:
         """Per-step risk data ``(N, K J, 3)`` for one solve, the slots' blocks stacked (Monte
         Carlo: fresh draws for the present slots, zeros for the absent ones)."""

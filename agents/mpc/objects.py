@@ -169,6 +169,15 @@ class Slots:
         filler = np.setdiff1d(np.arange(self.rows), index)[: rows - len(index)]
         return rows, np.concatenate([index, filler]).astype(int)
 
+    def capacities(self, data: bool) -> tuple[int | None, ...]:
+        """Every row count :meth:`packing` can give a step (``data``: the agent has risk data):
+        :data:`CAPACITIES` up to K M, and K M itself; ``(None,)`` (the full NLP) where it does not
+        pack."""
+        if not self.given or data:
+            return (None,)
+        rows = {min(c, self.rows) for c in CAPACITIES} | {self.rows}
+        return tuple(sorted(rows))
+
     def given_block(self, futures: list[Belief | None], weights: np.ndarray) -> np.ndarray:
         """The given beliefs' parameters (:func:`agents.mpc.nlp.parameters.given_vector`); empty
         without a predictor."""

@@ -223,6 +223,17 @@ class SMPC(PathFollowingMPC):
             self._epsilon, self.risk_budget, self._spent.get(index, 0.0), self.budget_share
         )
 
+    def _step_forms(self) -> set[str]:
+        r"""The tolerance's form; with a budget shared out step by step also $\epsilon_k = 0$'s
+        (what is left of the budget may run out, after a fallback)."""
+        shared = self.risk_budget is not None and self.budget_allocation == "share"
+        return {self._risk_variant(), *([self._risk_variant(0.0)] if shared else [])}
+
+    def prepare(self) -> float:
+        """:meth:`PathFollowingMPC.prepare`, the Monte Carlo pilot's problems too."""
+        pilot = getattr(self, "_pilot", None)
+        return super().prepare() + (pilot.prepare() if pilot is not None else 0.0)
+
     def _risk_value(self, ego: ca.SX, beliefs: list[Belief], data: ca.SX, numbers: ca.SX) -> ca.SX:
         """The per-stage R of the budget and the weight: the constraint's own R (exact:
         :meth:`~risk_env.risk.estimators.ExactRisk.solver_risk`; Monte Carlo: the smoothed estimate) summed

@@ -24,9 +24,9 @@ returning NaN; :attr:`agents.PathFollowingMPC.last_solve` says which level acted
     directly, from the shifted plan only ("elastic mode", as in SNOPT): the hard problem is
     most likely infeasible still, and where it is not, its exact penalty returns its solution.
 (c) if that fails too: the safest of a family of rate-limited manoeuvres (brake, hold,
-    accelerate, reverse, each straight or turning fully left or right; :mod:`agents.mpc.fallback`),
-    judged by the agent's own risk and the worst-case clearance over the horizon:
-    ``fallback="manoeuvre"``.
+    accelerate, reverse, each straight or turning fully left or right, and with a corridor
+    following the path; :mod:`agents.mpc.fallback`), judged by the agent's own risk, the corridor
+    and the worst-case clearance over the horizon: ``fallback="manoeuvre"``.
 
 **Real-time bound**: a step takes at most ``max_solve_time`` of wall time (by default 20 % of the
 sample time), enforced through the solver's own limits: each NLP is built at a few rungs of
@@ -52,11 +52,12 @@ from agents.base import CallRecord, SolveReport
 from agents.mpc import attempts, fallback, guesses
 from agents.mpc.attempts import Call, Guess, Tally
 from agents.mpc.fallback import feasible_action
+from agents.mpc.nlp.bounds import variable_bounds
 from agents.mpc.nlp.budget import Budget
-from agents.mpc.nlp.ocp import soft_variant, variable_bounds
+from agents.mpc.nlp.corridor import step_bounds, step_widths
+from agents.mpc.nlp.ocp import soft_variant
 from agents.mpc.nlp.settings import SolverSettings
 from agents.mpc.nlp.solver import Problem
-from risk_env.models.path import lateral_offset
 from risk_env.prediction.belief import Belief
 from risk_env.risk.estimators import WorstCaseRisk
 from risk_env.scenario.scenario import Scenario
@@ -257,22 +258,15 @@ class Step:
         return (None, 0.0) if out is None else (out, violation(out))
 
     def manoeuvre(self) -> tuple[str, np.ndarray]:
-        """Level (c): ``(name, inputs (N, NU))`` of the safest manoeuvre (:mod:`agents.mpc.fallback`),
-        by the agent's own risk (summed over the present objects) and the worst-case clearance
-        to the nearest of their truncation boxes."""
-        ctx, x0 = self.context, self.x0
-        t0 = time.perf_counter()
-        family = fallback.manoeuvres(ctx.scenario, x0)
-        ego = np.stack([guesses.rollout(self.base, x0, u)[1:][:, [0, 1, 2, 4]] for u in family.values()])
-        risk = np.stack([np.asarray(ctx.risk(e, self.futures, self.data), float).reshape(-1) for e in ego])
-        clearance = np.full(risk.shape, np.inf)
-        for k, f in enumerate(self.futures):
-            if f is not None:
-                worst = ctx.worsts[k]
-                clearance = np.minimum(clearance, worst.distance(ego, f) - worst.radius)
-        name = list(family)[fallback.safest(risk, clearance, ctx.epsilon)]
+        """Level (c): ``(name, inputs (N, NU))`` of the safest manoeuvre (:func:`agents.mpc.fallback.choose`:
+        the agent's own risk, the corridor, the worst-case clearance)."""
+        ctx, t0 = self.context, time.perf_counter()
+        risk = lambda ego: ctx.risk(ego, self.futures, self.data)  # noqa: E731
+        rollout = functools.partial(guesses.rollout, self.base, self.x0)
+        args = (risk, ctx.worsts, self.futures, ctx.epsilon)
+        choice = fallback.choose(ctx.scenario, self.x0, rollout, *args)
         self.manoeuvre_time = max(MANOEUVRE_TIME, 2.0 * (time.perf_counter() - t0))
-        return name, family[name]
+        return choice
 
     # ------------------------------------------------------------------ helpers
     def solve(
@@ -297,28 +291,28 @@ class Step:
         )
         return {"lbx": lbx, "ubx": ubx, "lbg": self.lbg(pr), "ubg": self.ubg(pr), "p": self.p}
 
-    def corridor(self) -> float:
-        """The corridor's half width [m] for this step: the path's, or for an ego that starts
-        outside it its own offset plus :data:`CORRIDOR_REENTRY` (so that the start alone never makes
-        the problem infeasible)."""
-        path = self.context.scenario.path
-        offset = abs(float(lateral_offset(path, self.x0[0], self.x0[1])))
-        return path.corridor if offset <= path.corridor else offset + CORRIDOR_REENTRY
+    def corridor_bounds(self, pr: Problem) -> tuple[np.ndarray, np.ndarray]:
+        """The corridor rows' ``(lower, upper)`` bounds: :func:`agents.mpc.nlp.corridor.step_widths`
+        (an ego outside the corridor gets :data:`CORRIDOR_REENTRY` more)."""
+        x, y = self.x0[0], self.x0[1]
+        width = step_widths(self.context.scenario, x, y, pr.soft, pr.variant == "free", CORRIDOR_REENTRY)
+        rows = pr.corridor_rows
+        return step_bounds(pr.lbg[rows], pr.ubg[rows], width[[pr.g_tags[i][0] - 1 for i in rows]])
 
     def lbg(self, pr: Problem) -> np.ndarray:
         """The rows' lower bounds, the risk rows' at the back-off."""
         lbg = pr.lbg.copy()
         lbg[pr.risk_rows] = self.context.backoff
         if pr.corridor_rows.size:
-            lbg[pr.corridor_rows] = -self.corridor()
+            lbg[pr.corridor_rows] = self.corridor_bounds(pr)[0]
         return lbg
 
     def ubg(self, pr: Problem) -> np.ndarray:
-        """The rows' upper bounds (the corridor's as :meth:`corridor`)."""
+        """The rows' upper bounds (the corridor's as :meth:`corridor_bounds`)."""
         if not pr.corridor_rows.size:
             return pr.ubg
         ubg = pr.ubg.copy()
-        ubg[pr.corridor_rows] = self.corridor()
+        ubg[pr.corridor_rows] = self.corridor_bounds(pr)[1]
         return ubg
 
     def guesses(

@@ -59,6 +59,7 @@ from risk_env.highway.common import (
 )
 from risk_env.highway.control import highway_action
 from risk_env.highway.idm import IDMEgo, reached
+from risk_env.highway.lane_agents import lane_agent, lane_scenario, prepare_route
 from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
 from risk_env.models.dynamics import unicycle_step
@@ -109,9 +110,6 @@ its 4 m lane: the MPC may not leave the road to escape a prediction)."""
 TRACK_GATE = 2.0
 """Largest distance [m] between a vehicle and where one seen a step earlier was predicted to be,
 for the two to count as the same vehicle (turn-rate estimate)."""
-CURVE_SPEED_SHARE = 0.9
-r"""On a circular lane $v_{ref}$ is capped to this share of $\omega_{max} r$ ($r$ the lane's radius),
-so the lane stays followable (:class:`~risk_env.Scenario` requires $\kappa v_{ref} \le \omega_{max}$)."""
 
 
 VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
@@ -162,6 +160,9 @@ class IntersectionAdapter:
             along highway-env's lanes, :class:`risk_env.highway.lanes.LanePredictor`), ``"constant"``
             (the paper's: constant speed and turn rate) or any :class:`risk_env.prediction.Predictor`;
             handed to ``make_agent`` as ``predictor=`` (not for ``"constant"``).
+        warm_up: when the route is known, build every lane's agent and every NLP it can run
+            (``prepare()``), so that no step builds one (:mod:`risk_env.highway.lane_agents`);
+            False: each when first needed, inside a step.
     """
 
     def __init__(
@@ -174,6 +175,7 @@ class IntersectionAdapter:
         switch_ahead: float = 2.0,
         slots: int = DEFAULT_SLOTS,
         predictor: str | Predictor | None = "lane",
+        warm_up: bool = True,
         **overrides: Any,
     ) -> None:
         if not callable(make_agent):
@@ -196,10 +198,6 @@ class IntersectionAdapter:
         if not (math.isfinite(switch_ahead) and switch_ahead >= 0):
             raise ValueError(f"switch_ahead must be >= 0 [m], got {switch_ahead!r}")
         self.switch_ahead = float(switch_ahead)
-        if not callable(make_agent):
-            raise TypeError(
-                f"make_agent must build an agent for a scenario (e.g. agents.RMPC), got {make_agent!r}"
-            )
         self.make_agent = make_agent
         if predictor is not None and not isinstance(predictor, Predictor):
             checks.text("predictor", predictor, HIGHWAY_PREDICTORS)
@@ -209,6 +207,9 @@ class IntersectionAdapter:
         named one is built on the road network at the first episode (the map: the same at every
         reset)."""
         self._agents: dict[ReferencePath, Any] = {}
+        self.warm_up = bool(warm_up)
+        self.build_time = 0.0
+        """Seconds the agents spent building their problems when routes were prepared."""
         self.route: RoutePath | None = None
         self.lane = 0
         """Index in :attr:`route` of the lane being followed."""
@@ -260,8 +261,13 @@ class IntersectionAdapter:
         return float(sum(a.spent_risk() for a in self._agents.values() if hasattr(a, "spent_risk")))
 
     def reset(self) -> None:
-        """Forget the episode: the next ``predict`` reads the route anew."""
+        """Forget the episode. With the env reset (a controlled vehicle), read its route and prepare
+        the agent of every lane (:mod:`risk_env.highway.lane_agents`); else the next ``predict``
+        does."""
         self._vehicle = None
+        base = unwrapped_highway(self.env)
+        if getattr(base, "vehicle", None) is not None and getattr(base, "road", None) is not None:
+            self._begin_episode(base)
 
     def predict(
         self,
@@ -316,6 +322,9 @@ class IntersectionAdapter:
             self.predictor = highway_predictor(self._predictor_arg, self.env)
         self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
         self.lane = 0
+        if self.warm_up:
+            args = (self.base_scenario, self.make_agent, self.slots, self.predictor)
+            self.build_time += prepare_route(self._agents, self.route, *args)
         for agent in self._agents.values():
             if hasattr(agent, "reset"):
                 agent.reset()
@@ -353,22 +362,12 @@ class IntersectionAdapter:
     def _scenario_for(self, lane: int) -> Scenario:
         if self.route is None:
             raise ValueError("no route yet: the adapter reads it at its first predict() of an episode")
-        path = self.route.paths[lane]
-        base = self.base_scenario
-        v_ref = base.ego.v_ref
-        if path.curvature != 0.0:
-            v_ref = min(v_ref, CURVE_SPEED_SHARE * base.ego.omega_max / abs(path.curvature))
-        return base.replace(
-            goal=path.goal, curvature=path.curvature, lambda_start=path.lambda_start, v_ref=v_ref
-        )
+        return lane_scenario(self.base_scenario, self.route.paths[lane])
 
     def _agent_for(self, lane: int) -> Any:
-        scenario = self._scenario_for(lane)
-        path = self.route.paths[lane]
-        if path not in self._agents:
-            extra = {} if self.predictor is None else {"predictor": self.predictor}
-            self._agents[path] = self.make_agent(scenario, object_slots=self.slots, **extra)
-        return self._agents[path]
+        self._scenario_for(lane)  # the route's check
+        path, base = self.route.paths[lane], self.base_scenario
+        return lane_agent(self._agents, path, base, self.make_agent, self.slots, self.predictor)
 
     def _measure_others(self, rows: np.ndarray) -> np.ndarray:
         """Measurements ``(K, 5)`` of the other vehicles; the turn rate from the heading change of

@@ -60,6 +60,7 @@ The sections of :func:`assemble`, in order:
   up to twice as much near the object's predicted mean (:data:`NEAR_WEIGHT`): where the boxes cannot be kept
   off, the plan misses them where the object is least likely. The slack of row $n$ is a
   control of stage $n$ (the last stage's after $x_N$), so the problem stays stage-wise for fatrop.
+  The path's corridor is soft there too (:mod:`agents.mpc.nlp.corridor`).
 
 The solver built on this NLP lives in :mod:`agents.mpc.nlp.solver`; the controller that calls it in
 :mod:`agents.mpc.controller`.
@@ -73,8 +74,8 @@ from collections.abc import Callable
 from typing import Any
 
 import casadi as ca
-import numpy as np
 
+from agents.mpc.nlp.corridor import CORRIDOR_SLACK, corridor_rows, corridor_weight
 from agents.mpc.nlp.parameters import (
     NUMBER_COLUMNS,
     SLOT_SIZE,
@@ -260,6 +261,7 @@ def assemble(
     weight = p_terms[4] if terms[1] and value is not None else None
     C = {n: sym.sym(f"c_{n}") for n in range(1, N + 1)} if budget else {}  # sum of R_1..R_{n-1}
     s_budget = sym.sym("s_budget") if budget and soft else None
+    SC = {n: sym.sym(f"sc_{n}") for n in S} if math.isfinite(sc.path.corridor) else {}  # the corridor's
     w: list[Any] = []
     w_tags: list[tuple[int, str, int]] = []
     g: list[Any] = []
@@ -323,13 +325,20 @@ def assemble(
         if n == N and s_budget is not None:
             w.append(s_budget)
             w_tags.append((N, "s", 1))
+        if n in SC:
+            w.append(SC[n])
+            w_tags.append((n, "s", CORRIDOR_SLACK))
 
-    def add_corridor(n: int) -> None:
-        """|lateral offset of state n from the arc| <= the path's corridor (none when infinite);
-        a step may widen it for an ego that starts outside (``Step.bounds``)."""
-        c = sc.path.corridor
-        if math.isfinite(c):
-            add_g(lateral_offset(sc.path, X[n][0], X[n][1], CASADI), -c, c, n, "corridor")
+    def add_corridor(n: int) -> Any:
+        """|lateral offset of state n from the arc| <= the path's corridor (none when infinite;
+        soft in a soft variant: :mod:`agents.mpc.nlp.corridor`); its slack's cost."""
+        if math.isfinite(sc.path.corridor):
+            offset = lateral_offset(sc.path, X[n][0], X[n][1], CASADI)
+            _ = [
+                add_g(r, lo, hi, n, "corridor")
+                for r, lo, hi in corridor_rows(offset, sc.path.corridor, SC.get(n))
+            ]
+        return soft_penalty * corridor_weight(N, EARLY_WEIGHT) * SC[n] if n in SC else 0.0
 
     def add_accumulator(n: int) -> None:
         r"""$c_{n+1} = c_n + \nu R_n$ ($c_1 = 0$, $\nu$ the normaliser), the gap row's last component:
@@ -349,38 +358,15 @@ def assemble(
         add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
         if n >= 1:
-            cost += add_risk(n)
-            add_corridor(n)
+            cost += add_risk(n) + add_corridor(n)
         cost += w_v * (U[n][2] - p_vref) ** 2
         cost += pose_cost(X[n + 1] if stage_cost == "reached" else X[n])
     w += [X[N], *([C[N]] if C else [])]
     w_tags += [(N, "x", i) for i in range(NX)] + ([(N, "c", 0)] if C else [])
     add_slack(N)
-    cost += add_risk(N)
-    add_corridor(N)
+    cost += add_risk(N) + add_corridor(N)
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g), "p": p}
     return nlp, (w_tags, g_tags, lbg, ubg), belief_fn
-
-
-def variable_bounds(
-    scenario: Scenario,
-    x_index: np.ndarray,
-    u_index: np.ndarray,
-    n_w: int,
-    x0: np.ndarray,
-    slack_index: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    r"""``(lbx, ubx)`` of w ``(n_w,)``: $x_0$ fixed to the measurement, $\lambda_n \ge$ the path's
-    start, the input bounds, slacks (at ``slack_index``) $\ge 0$."""
-    ego = scenario.ego
-    lbx, ubx = np.full(n_w, -np.inf), np.full(n_w, np.inf)
-    if slack_index is not None:
-        lbx[slack_index] = 0.0
-    lbx[x_index[0]] = ubx[x_index[0]] = x0
-    lbx[x_index[1:, 3]] = min(scenario.path.lambda_start, x0[3])
-    lbx[u_index] = (ego.v_min, -ego.omega_max, ego.v_min)
-    ubx[u_index] = (ego.v_max, ego.omega_max, ego.v_max)
-    return lbx, ubx
 
 
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:

@@ -42,9 +42,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from agents.mpc.nlp.bounds import variable_bounds
 from agents.mpc.nlp.budget import CallTimes
 from agents.mpc.nlp.calls import BoundPattern, BoundPatternError, bound_pattern
 from agents.mpc.nlp.compiled import compiled_library, have_c_compiler
+from agents.mpc.nlp.corridor import CORRIDOR_SLACK, corridor_weight
 from agents.mpc.nlp.ocp import (
     EARLY_WEIGHT,
     NU,
@@ -54,7 +56,6 @@ from agents.mpc.nlp.ocp import (
     RiskValue,
     assemble,
     stage_functions,
-    variable_bounds,
 )
 from agents.mpc.nlp.parameters import parameter_vector, slot_numbers
 from agents.mpc.nlp.settings import SolverSettings
@@ -64,8 +65,22 @@ from risk_env.scenario.scenario import Scenario
 USEFUL_RUNG = 2.0
 """A fatrop rung is built when its iterations at the prior time per iteration take at most this
 many step caps (a larger one could never fit the time left in a step)."""
-_CACHE_SIZE = 48
+_CACHE_SIZE = 128
 _SOLVER_CACHE: OrderedDict[Any, Problem] = OrderedDict()
+
+
+@dataclass
+class CacheCounts:
+    """How the process-wide cache (:func:`cached_problem`) answered since the process started:
+    problems built (misses) and problems found (hits). A step that built nothing leaves
+    ``builds`` as it was (what :meth:`agents.PathFollowingMPC.prepare` is for)."""
+
+    builds: int = 0
+    hits: int = 0
+
+
+CACHE_COUNTS = CacheCounts()
+"""The process's :class:`CacheCounts`."""
 
 
 @dataclass(frozen=True)
@@ -121,6 +136,9 @@ class Problem:
     corridor_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     r"""Rows of g of the lateral offsets at $n = 1, \dots, N$, within $\pm$ the path's corridor
     (empty without one)."""
+    corridor_slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    """For each of :attr:`corridor_rows`, the position of its slack in :attr:`slack_index` (a soft
+    variant's corridor, :mod:`agents.mpc.nlp.corridor`; else empty)."""
     pattern: BoundPattern | None = None
     """The split of the bounds into equalities and inequalities that every call keeps
     (:func:`agents.mpc.nlp.calls.bound_pattern`; checked by :func:`agents.mpc.nlp.calls.call_solver`)."""
@@ -141,10 +159,13 @@ class Problem:
 
 def cached_problem(key: tuple[Any, ...], build: Callable[[], Problem]) -> Problem:
     """The process-wide problem under ``key``, built by ``build()`` on a miss (``build_time`` 0 on a
-    hit); the least recently used of more than 48 are dropped."""
+    hit); the least recently used of more than 128 are dropped (an SMPC at the intersection warms up
+    about 60: :meth:`agents.PathFollowingMPC.prepare`). Counted in :data:`CACHE_COUNTS`."""
     if key in _SOLVER_CACHE:
         _SOLVER_CACHE.move_to_end(key)
+        CACHE_COUNTS.hits += 1
         return replace(_SOLVER_CACHE[key], build_time=0.0)
+    CACHE_COUNTS.builds += 1
     problem = build()
     _SOLVER_CACHE[key] = problem
     while len(_SOLVER_CACHE) > _CACHE_SIZE:
@@ -245,6 +266,11 @@ def build_problem(
     )
     if not slacks:
         row_slack = np.zeros(0, dtype=int)
+    soft_corridor = [slacks[g_tags[i][0], "s", CORRIDOR_SLACK] for i in corridor_rows if slacks]
+
+    def weight(tag: tuple[int, str, int]) -> float:  # a slack's cost over rho: the risk's, the corridor's
+        return corridor_weight(N, EARLY_WEIGHT) if tag[2] == CORRIDOR_SLACK else EARLY_WEIGHT ** (N - tag[0])
+
     return Problem(
         variant=variant,
         solvers=tuple(solvers),
@@ -260,7 +286,7 @@ def build_problem(
         corridor_rows=np.array(corridor_rows, dtype=int),
         row_slack=row_slack,
         slack_index=slack_index,
-        slack_costs=np.array([penalty * EARLY_WEIGHT ** (N - tag[0]) for tag in w_tags if tag[1] == "s"]),
+        slack_costs=np.array([penalty * weight(tag) for tag in w_tags if tag[1] == "s"]),
         w_tags=tuple(w_tags),
         shift_w=np.array([index.get((s + 1, k, c), i) for i, (s, k, c) in enumerate(w_tags)]),
         g_tags=tuple(g_tags),
@@ -269,6 +295,7 @@ def build_problem(
         times=CallTimes(limits, prior, failing),
         acc_index=np.array([i for i, tag in enumerate(w_tags) if tag[1] == "c"], dtype=int),
         acc_rows=np.array([i for i, tag in enumerate(g_tags) if tag[1] == "accumulate"], dtype=int),
+        corridor_slack=np.array(soft_corridor, dtype=int),
         pattern=pattern,
     )
 
