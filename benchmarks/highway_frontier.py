@@ -9,9 +9,10 @@ tables) over the same seeds, by default the RMPC, the SMPC at the episode budget
 and 0.1, and highway-env's IDM, each MPC with the lane predictor and with the paper's
 (``--predictor lane,constant``), and draws ``frontier.png``: every agent's goal rate against its
 collision rate, each with its Wilson 95 % interval. The lane predictor's points are filled, the
-paper's (``constant``) hollow; the SMPC's budgets are joined in order of B and labelled; the
-shaded quadrant is where an agent beats the IDM on both axes (a goal rate at least the IDM's with
-fewer collisions). Outputs in ``--out``, one output set (``--resume`` goes on after an
+paper's (``constant``) hollow, any other predictor's half filled; the SMPC's budgets are joined
+in order of B and labelled; the shaded quadrant is where an agent beats the IDM on both axes (a
+goal rate at least the IDM's with fewer collisions). Outputs in ``--out``, one output set (``--resume``
+goes on after an
 interruption): ``frontier.png``, ``frontier.md`` (the tables and which agents beat the IDM),
 ``frontier.csv`` and ``frontier_episodes.csv``.
 """
@@ -37,7 +38,9 @@ MARKERS = {"rmpc": "^", "smpc": "o", "idm": "*"}
 PREDICTOR_NAMES = {"constant": "the paper's"}
 """How the legend names a predictor (others by their own name)."""
 PREDICTOR_STYLE = {"lane": "-", "constant": "--"}
-"""Line style of the SMPC's budget curve with each predictor."""
+"""Line style of the SMPC's budget curve with each predictor (others dotted)."""
+PREDICTOR_FILL = {"lane": "full", "constant": "none"}
+"""Marker fill of each predictor's points (others half filled, ``"left"``)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -99,7 +102,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
     curves: dict[str, list[tuple[float, float, float]]] = {}
     tags: dict[tuple[float, float], list[float]] = {}
     for s in summary:
-        kind, hollow = s["agent"].split(":")[0], s["predictor"] == "constant"
+        kind = s["agent"].split(":")[0]
         label, marker, budget = _style(s)
         x, x_lo, x_hi = _rate(s, "collision")
         y, y_lo, y_hi = _rate(s, "goal")
@@ -115,7 +118,8 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             ms=13 if kind == "idm" else 8,
             ls="none",
             color=colour,
-            mfc="white" if hollow else colour,
+            fillstyle=PREDICTOR_FILL.get(s["predictor"], "left") if s["predictor"] else "full",
+            markerfacecoloralt="white",
             mew=1.6,
             label=label,
         )
@@ -127,7 +131,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
         ax.annotate(text, (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=True))
-    ax.legend(unique.values(), unique.keys(), fontsize=8, loc="lower right")
+    ax.legend(unique.values(), unique.keys(), fontsize=8, loc="upper right")
     ax.set_xlabel("collision rate [%] (Wilson 95 % interval)")
     ax.set_ylabel("goal rate [%] (Wilson 95 % interval)")
     ax.set_xlim(left=-2)
