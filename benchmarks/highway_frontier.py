@@ -11,10 +11,9 @@ and 0.1, and highway-env's IDM, each MPC with the lane predictor and with the pa
 collision rate, each with its Wilson 95 % interval. The lane predictor's points are filled, the
 paper's (``constant``) hollow, any other predictor's half filled; the SMPC's budgets are joined
 in order of B and labelled; the shaded quadrant is where an agent beats the IDM on both axes (a
-goal rate at least the IDM's with fewer collisions). Outputs in ``--out``, one output set (``--resume``
-goes on after an
-interruption): ``frontier.png``, ``frontier.md`` (the tables and which agents beat the IDM),
-``frontier.csv`` and ``frontier_episodes.csv``.
+goal rate at least the IDM's with fewer collisions). Outputs in ``--out``, one output set
+(``--resume`` goes on after an interruption): ``frontier.png``, ``frontier.md`` (the tables and
+which agents beat the IDM), ``frontier.csv`` and ``frontier_episodes.csv``.
 """
 
 from __future__ import annotations
