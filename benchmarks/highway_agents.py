@@ -140,7 +140,7 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
     """The driver of ``agent`` for ``env``: the IDM, or the MPC through
     :class:`risk_env.highway.IntersectionAdapter` with ``predictor`` and the options of ``args``
     (``uncertainty``, ``slots``, ``max_solve_time``, ``mode_threshold``, ``budget_share``,
-    ``lane_pieces``)."""
+    ``lane_pieces``, ``gate``)."""
     from agents import RMPC, SMPC
     from risk_env.highway import IDMEgo, IntersectionAdapter
 
@@ -166,4 +166,5 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         slots=args.slots,
         predictor=predictor,
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
+        gate=getattr(args, "gate", True),
     )

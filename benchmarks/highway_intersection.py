@@ -143,6 +143,13 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         help="P: the MPCs' lane predictor splits each route's reachable stretch into P bands, one mode"
         " each (smaller boxes on curves; the risk is scored with P = 1)",
     )
+    parser.add_argument(
+        "--gate",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="the junction gate: the MPCs wait at a virtual stop line unless they can cross the"
+        " junction before the predicted traffic reaches their path (risk_env.highway.gate)",
+    )
     parser.add_argument("--slots", type=cli.positive_int, default=5, help="the MPC's object slots")
     parser.add_argument("--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="Table I level")
     parser.add_argument(

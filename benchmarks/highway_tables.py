@@ -126,6 +126,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f" all), uncertainty {args.uncertainty}, {args.slots} object slots, mode threshold"
         f" {args.mode_threshold:g}, budget share {args.budget_share:g}"
         f", corridor {getattr(args, 'corridor', 1.0):g} m"
+        f", junction gate {'on' if getattr(args, 'gate', True) else 'off'}"
         f"{'' if getattr(args, 'lane_pieces', 1) == 1 else f', lane predictor in {args.lane_pieces} pieces'}"
         "; the MPCs plan with the"
         f" predictor in brackets. Risk scored by RiskCostWrapper (exact, severity {args.severity},"

@@ -58,12 +58,12 @@ from risk_env.highway.common import (
     unwrapped_highway,
 )
 from risk_env.highway.control import highway_action
+from risk_env.highway.gate import JunctionGate, check_gate, make_gate
 from risk_env.highway.idm import IDMEgo, reached
 from risk_env.highway.lane_agents import lane_agent, lane_scenario, prepare_route
 from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
-from risk_env.models.dynamics import unicycle_step
-from risk_env.models.ops import NUMPY
+from risk_env.highway.tracking import TRACK_GATE, measure
 from risk_env.models.path import path_error_vector, project
 from risk_env.prediction.predictors import Predictor
 from risk_env.scenario.scenario import ReferencePath, Scenario
@@ -106,11 +106,6 @@ lanes' limit and the ego's entry speed are 10), no reversing on a road, $v_{max}
 2 m (highway-env's 5 x 2 m cars touch at centre distances of 2 to 5.4 m; two 2 m discs at 4 m),
 a corridor of 1 m about the lane's centreline for the planned centre (the 2 m wide car stays in
 its 4 m lane: the MPC may not leave the road to escape a prediction)."""
-
-TRACK_GATE = 2.0
-"""Largest distance [m] between a vehicle and where one seen a step earlier was predicted to be,
-for the two to count as the same vehicle (turn-rate estimate)."""
-
 
 VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
 """The intersections the adapter drives. ``intersection-v2`` (default): highway-env 1.12 fixed its
@@ -163,6 +158,9 @@ class IntersectionAdapter:
         warm_up: when the route is known, build every lane's agent and every NLP it can run
             (``prepare()``), so that no step builds one (:mod:`risk_env.highway.lane_agents`);
             False: each when first needed, inside a step.
+        gate: the junction gate (:mod:`risk_env.highway.gate`, default on): before the junction, the
+            MPC gets a virtual stationary object at the stop line whenever the ego could not cross
+            the junction before another vehicle's predicted bounds reach its path; False: none.
     """
 
     def __init__(
@@ -176,6 +174,7 @@ class IntersectionAdapter:
         slots: int = DEFAULT_SLOTS,
         predictor: str | Predictor | None = "lane",
         warm_up: bool = True,
+        gate: bool = True,
         **overrides: Any,
     ) -> None:
         if not callable(make_agent):
@@ -207,6 +206,11 @@ class IntersectionAdapter:
         named one is built on the road network at the first episode (the map: the same at every
         reset)."""
         self._agents: dict[ReferencePath, Any] = {}
+        self.gate: JunctionGate | None = None
+        """The junction gate (None: off; built with the predictor at the first episode)."""
+        self._gate_on = check_gate(gate)
+        self._agent_predictor: Predictor | None = None
+        self._ready = False
         self.warm_up = bool(warm_up)
         self.build_time = 0.0
         """Seconds the agents spent building their problems when routes were prepared."""
@@ -288,10 +292,13 @@ class IntersectionAdapter:
         scenario = self._scenario_for(self.lane)
         others = self._measure_others(rows[1:])
         nearest = np.argsort(np.hypot(others[:, 0] - x, others[:, 1] - y), kind="stable")
-        self.last_objects = others[nearest[: self.slots]]
+        progress = self.route.progress(self.lane, x, y)
+        virtual = np.zeros((0, 5)) if self.gate is None else self.gate.step(progress, speed, others)
+        self.last_objects = others[nearest[: self.slots - len(virtual)]]
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
-        obs = layout.build((x, y, theta), (speed, self._omega), lam, error, self.last_objects, self.slots)
+        planned = np.vstack([virtual, self.last_objects])
+        obs = layout.build((x, y, theta), (speed, self._omega), lam, error, planned, self.slots)
         agent = self._agent_for(self.lane)
         action, _ = agent.predict(obs, episode_start=self._fresh or switched, deterministic=True)
         self._fresh = False
@@ -318,16 +325,21 @@ class IntersectionAdapter:
         if vehicle is None:
             raise ValueError("the env has no controlled vehicle: call env.reset() first")
         self._vehicle = vehicle
-        if self.predictor is None and not self._agents:
+        if not self._ready:  # the map is the same at every reset
             self.predictor = highway_predictor(self._predictor_arg, self.env)
+            gate = make_gate(self._gate_on, self.predictor, self.base_scenario, base)
+            self.gate, self._agent_predictor = gate
+            self._ready = True
         self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
         self.lane = 0
         if self.warm_up:
-            args = (self.base_scenario, self.make_agent, self.slots, self.predictor)
+            args = (self.base_scenario, self.make_agent, self.slots, self._agent_predictor)
             self.build_time += prepare_route(self._agents, self.route, *args)
         for agent in self._agents.values():
             if hasattr(agent, "reset"):
                 agent.reset()
+        if self.gate is not None:
+            self.gate.reset(self.route, self.base_scenario)
         self._tracks = np.zeros((0, 5))
         action = getattr(vehicle, "action", {}) or {}
         self._steering = float(action.get("steering", 0.0))
@@ -367,28 +379,17 @@ class IntersectionAdapter:
     def _agent_for(self, lane: int) -> Any:
         self._scenario_for(lane)  # the route's check
         path, base = self.route.paths[lane], self.base_scenario
-        return lane_agent(self._agents, path, base, self.make_agent, self.slots, self.predictor)
+        return lane_agent(self._agents, path, base, self.make_agent, self.slots, self._agent_predictor)
 
     def _measure_others(self, rows: np.ndarray) -> np.ndarray:
-        """Measurements ``(K, 5)`` of the other vehicles; the turn rate from the heading change of
-        an associated vehicle of the previous step (else 0)."""
-        omega = np.zeros(len(rows))
-        prev = self._tracks
-        if len(rows) and len(prev):
-            px, py, _ = unicycle_step(
-                prev[:, 0], prev[:, 1], prev[:, 2], prev[:, 3], prev[:, 4], self.dt, NUMPY
-            )
-            gap = np.hypot(rows[:, 0, None] - px[None, :], rows[:, 1, None] - py[None, :])
-            nearest = np.argmin(gap, axis=1)
-            matched = gap[np.arange(len(rows)), nearest] < TRACK_GATE
-            turn = NUMPY.wrap_angle(rows[:, 2] - prev[nearest, 2]) / self.dt
-            omega = np.where(matched, turn, 0.0)
-        self._tracks = np.column_stack([rows, omega]) if len(rows) else np.zeros((0, 5))
+        """Measurements ``(K, 5)`` of the other vehicles (:func:`risk_env.highway.tracking.measure`)."""
+        self._tracks = measure(rows, self._tracks, self.dt)
         return self._tracks.copy()
 
 
 __all__ = [
     "ADAPTER_DEFAULTS",
+    "TRACK_GATE",
     "INTERSECTION_CONFIG",
     "IDMEgo",
     "IntersectionAdapter",

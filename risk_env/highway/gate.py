@@ -1,0 +1,317 @@
+r"""The junction gate: a virtual stop line before the intersection (as industrial planners make stop
+decisions), so that the ego waits *before* the junction rather than in it.
+
+With a horizon of N T = 3 s the MPC enters the junction when the next 3 s look clear, meets
+crossing traffic inside it, brakes and stops in a conflict zone, where highway-env's traffic
+(which does not avoid a stopped car in a crossing lane) drives into it. The gate decides before the
+junction, each step, whether the ego can cross all of it first:
+
+- **The conflict zone** is the ego's route inside the junction: its lanes from a node
+  ``ir*`` (highway-env's intersection entry) to the next, sampled every metre,
+  $s_{in} \le s_j \le s_{out}$.
+- **The ego** clears point $j$ when its centre is ``reach`` = $r_{ego} + r_{obj}$ past it, at
+  $t^e_j$, driving from its speed at its largest acceleration ``accel`` up to ``speed_cap`` (the
+  planner's $v_{ref}$ there).
+- **Each other vehicle** reaches point $j$ at $t^o_j$, the first time one of its predicted modes of
+  weight at least :data:`GATE_THRESHOLD` (their truncation boxes: the interval predictor's fast
+  run bounds the box ahead) comes within ``reach`` of it, over a horizon long enough for the ego to
+  cross (at most :data:`GATE_STEPS` steps), linearly between steps.
+- The gate **closes** when some vehicle reaches some point before the ego has cleared it with
+  :data:`GATE_MARGIN` to spare, $t^o_j < t^e_j + $ margin; then the MPC is handed a **virtual
+  stationary object** at the stop line (:meth:`JunctionGate.virtual`), in one of its object slots,
+  which its risk rows keep it off like any vehicle (no change to the problem).
+- The ego **commits** once, the gate open, it cannot stop its front before the junction at
+  ``accel`` ($v^2 / 2a$ beyond the distance left), or once its front is past the line: from then on
+  the gate stays open this episode. A gate that closes when the ego can no longer stop before the
+  line stays closed: the MPC brakes as hard as it can, and an ego that stopped past the line is held
+  where it is (the virtual object just ahead of it) until the gate opens.
+
+The virtual object is predicted standing still with the spread :data:`VIRTUAL_SIGMA`, truncated at
+:data:`VIRTUAL_HALF` (:class:`GatePredictor`): its probability-severity risk is exactly 0 while the
+ego's disc stays :data:`VIRTUAL_HALF` clear of its disc, so an SMPC's spent budget is charged
+nothing for it when the plan keeps off it (the adapter records what was: ``gate_charge``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from risk_env import checks
+from risk_env.highway.common import unwrapped_highway
+from risk_env.highway.lane_agents import lane_scenario
+from risk_env.highway.route import RoutePath
+from risk_env.prediction.belief import Belief
+from risk_env.prediction.mixture import Mixture
+from risk_env.prediction.predictors import ConstantPredictor, Predictor
+from risk_env.scenario.scenario import Scenario
+
+JUNCTION_PREFIX = "ir"
+"""A route lane from a node named so lies inside highway-env's intersection (``ir*`` -> ``il*``)."""
+GATE_MARGIN = 0.5
+"""Time [s] the ego must have cleared a point of the zone before another vehicle reaches it."""
+GATE_THRESHOLD = 0.05
+"""Weight of a vehicle's route hypothesis from which the gate reckons with it."""
+GATE_STEPS = 20
+"""Most prediction steps the gate looks ahead (10 s at T = 0.5 s)."""
+GATE_RANGE = 40.0
+"""Distance [m] of the ego to the junction within which the gate judges (farther: open)."""
+SUBSTEPS = 4
+"""Time samples per prediction step (positions linear in between)."""
+VIRTUAL_SIGMA = 0.05
+"""Standard deviation [m] of the virtual object's position (and [m/s] of its speed)."""
+VIRTUAL_HALF = 0.15
+"""Half width [m] of its truncation box."""
+LINE_BUFFER = 1.5
+"""How far [m] before the line the virtual object stops the ego's front (the plan brakes late and
+highway-env's car lags it)."""
+HOLD_GAP = 0.5
+"""Gap [m] between the ego's disc and the virtual object when the object holds an ego past the line."""
+MATCH = 1e-3
+"""Largest difference (float32 observation rounding) between a measurement and the virtual one."""
+
+
+class GateError(ValueError):
+    """A bad value for the junction gate (names the parameter and what was expected)."""
+
+
+def check_gate(gate: Any) -> bool:
+    """``gate`` as a bool (``True``/``False`` only; a :class:`GateError` naming ``gate`` else)."""
+    if not isinstance(gate, (bool, np.bool_)):
+        raise GateError(
+            f"gate must be True or False (the junction gate on or off), got {checks.describe(gate)}"
+        )
+    return bool(gate)
+
+
+def junction_span(route: RoutePath) -> tuple[float, float] | None:
+    """Route arc lengths ``(s_in, s_out)`` [m] of the route's first run of junction lanes (from an
+    ``ir*`` node), or None when it crosses no junction."""
+    inside = [lane[0].startswith(JUNCTION_PREFIX) for lane in route.lanes]
+    if not any(inside):
+        return None
+    first = inside.index(True)
+    last = first
+    while last + 1 < len(inside) and inside[last + 1]:
+        last += 1
+    return float(route.offsets[first]), float(route.offsets[last] + route.lengths[last])
+
+
+def travel_time(distance: np.ndarray, speed: float, accel: float, cap: float) -> np.ndarray:
+    """Time [s] to cover ``distance`` [m] (``(J,)``, <= 0: 0) from ``speed`` [m/s] accelerating at
+    ``accel`` [m/s^2] up to ``cap`` [m/s]."""
+    d = np.maximum(np.asarray(distance, dtype=float), 0.0)
+    v0 = min(max(float(speed), 0.0), cap)
+    d_acc = (cap**2 - v0**2) / (2.0 * accel)
+    accelerating = (np.sqrt(v0**2 + 2.0 * accel * np.minimum(d, d_acc)) - v0) / accel
+    return np.where(d <= d_acc, accelerating, (cap - v0) / accel + (d - d_acc) / cap)
+
+
+def first_reach(
+    mixture: Mixture, points: np.ndarray, reach: float, dt: float, threshold: float
+) -> np.ndarray:
+    """``(J,)`` the first time [s] any mode of ``mixture`` of weight at least ``threshold`` has its
+    truncation box within ``reach`` [m] of each of ``points (J, 2)`` (inf: not within its steps)."""
+    out = np.full(len(points), math.inf)
+    for mode in mixture.above(threshold):
+        b = mode.beliefs.as_array()  # (N+1, 12)
+        n = len(b)
+        tau = np.linspace(0.0, (n - 1) * dt, (n - 1) * SUBSTEPS + 1)
+        grid = np.arange(n) * dt
+        x, y = np.interp(tau, grid, b[:, 0]), np.interp(tau, grid, b[:, 1])
+        hx, hy = np.interp(tau, grid, b[:, 7]), np.interp(tau, grid, b[:, 8])
+        frame = np.interp(tau, grid, np.unwrap(b[:, 11]))
+        dx, dy = points[None, :, 0] - x[:, None], points[None, :, 1] - y[:, None]
+        c, s = np.cos(frame)[:, None], np.sin(frame)[:, None]
+        along = np.maximum(np.abs(c * dx + s * dy) - hx[:, None], 0.0)
+        across = np.maximum(np.abs(-s * dx + c * dy) - hy[:, None], 0.0)
+        near = np.hypot(along, across) < reach  # (T, J)
+        hit = np.where(near.any(axis=0), tau[np.argmax(near, axis=0)], math.inf)
+        out = np.minimum(out, hit)
+    return out
+
+
+@dataclass
+class GateDecision:
+    """One step's verdict."""
+
+    closed: bool
+    """Whether the ego must wait at the stop line (the MPC gets the virtual object)."""
+    committed: bool
+    """Whether the ego is past the point where it can stop before the junction."""
+    slack: float = math.inf
+    r"""$\min_j (t^o_j - t^e_j)$ [s] over the zone (inf: not judged or nobody comes)."""
+
+
+class JunctionGate:
+    """The gate of one route (see the module). ``predictor``: how the other vehicles are
+    predicted (any :class:`~risk_env.prediction.Predictor`); ``reach`` [m]: the ego's and an object's
+    radii summed; ``accel`` [m/s^2]: the ego's acceleration (also its braking, to commit);
+    ``half_length`` [m]: half the ego car's length
+    (its front stops at the line); ``dt`` [s]: the prediction step."""
+
+    def __init__(
+        self,
+        predictor: Predictor,
+        reach: float,
+        accel: float,
+        half_length: float,
+        dt: float,
+        margin: float = GATE_MARGIN,
+        threshold: float = GATE_THRESHOLD,
+    ) -> None:
+        for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise GateError(f"{name} must be a finite number > 0, got {value!r}")
+        if not (isinstance(margin, (int, float)) and math.isfinite(margin) and margin >= 0):
+            raise GateError(f"margin must be a finite number >= 0 [s], got {margin!r}")
+        if not (isinstance(threshold, (int, float)) and 0.0 <= threshold <= 1.0):
+            raise GateError(f"threshold must lie in [0, 1], got {threshold!r}")
+        self.predictor = predictor
+        self.reach, self.accel, self.speed_cap = float(reach), float(accel), math.inf
+        self.half_length, self.dt = float(half_length), float(dt)
+        self.margin, self.threshold = float(margin), float(threshold)
+        self.route: RoutePath | None = None
+        self.span: tuple[float, float] | None = None
+        self.committed = False
+        self.closed_steps = 0
+        """Steps this episode the gate was closed."""
+        self.last = GateDecision(False, False)
+        self._progress = self._held = -math.inf
+        self.wrapper: GatePredictor | None = None
+        """The agents' predictor the gate tells its virtual object (:meth:`step`), if any."""
+
+    def reset(self, route: RoutePath, scenario: Scenario) -> None:
+        """A new episode on ``route``: its conflict zone, not committed; the ego's speed through it
+        :attr:`speed_cap`, the lowest $v_{ref}$ of ``scenario`` re-posed on the route's lanes (the
+        planner's speed there)."""
+        self.route, self.span = route, junction_span(route)
+        self.speed_cap = min(lane_scenario(scenario, path).ego.v_ref for path in route.paths)
+        self.committed, self.closed_steps = False, 0
+        self._progress = self._held = -math.inf
+        self.last = GateDecision(False, self.span is None)
+
+    def decide(self, progress: float, speed: float, others: np.ndarray) -> GateDecision:
+        """The verdict for the ego at route arc length ``progress`` [m] and ``speed`` [m/s], the
+        other vehicles measured as ``others (m, 5)``."""
+        if self.span is None or self.committed:
+            self.last = GateDecision(False, True)
+            return self.last
+        s_in, s_out = self.span
+        left = s_in - self.half_length - progress  # the centre's distance to its stop
+        # an ego that can no longer stop (or is past the line) commits only if the gate let it come;
+        # else it brakes as hard as it can and waits at the line or where it stopped past it
+        self._progress = float(progress)
+        if not self.last.closed and (left < 0.0 or max(speed, 0.0) ** 2 / (2.0 * self.accel) > left):
+            self.committed = True
+            self.last = GateDecision(False, True)
+            return self.last
+        if left > GATE_RANGE or not len(others):
+            self.last = GateDecision(False, False)
+            return self.last
+        s = np.arange(s_in, s_out + 1e-9, 1.0)
+        points = self.route.position(s)
+        ego_clear = travel_time(s + self.reach - progress, speed, self.accel, self.speed_cap)
+        steps = min(GATE_STEPS, math.ceil((float(ego_clear.max()) + self.margin) / self.dt))
+        slack = math.inf
+        for mixture in self.predictor.predict_scene(np.asarray(others, dtype=float), steps):
+            reach = first_reach(mixture, points, self.reach, self.dt, self.threshold)
+            slack = min(slack, float(np.min(reach - ego_clear)))
+        closed = slack < self.margin
+        self.closed_steps += closed
+        self.last = GateDecision(closed, False, slack)
+        return self.last
+
+    def step(self, progress: float, speed: float, others: np.ndarray) -> np.ndarray:
+        """:meth:`decide`, and the objects the MPC gets from the gate ``(0 or 1, 5)``: the virtual
+        object when closed; the agents' :class:`GatePredictor` (:attr:`wrapper`) is told which."""
+        virtual = self.virtual() if self.decide(progress, speed, others).closed else None
+        if self.wrapper is not None:
+            self.wrapper.virtual = virtual
+        return np.zeros((0, 5)) if virtual is None else virtual[None]
+
+    def virtual(self) -> np.ndarray:
+        """The virtual object's measurement ``(5,)``: standing on the ego's route where the ego's disc
+        touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry (or, the ego past
+        that, just ahead of the ego's disc, where it then stays: it holds the ego), heading along the
+        route."""
+        s_in, _ = self.span
+        s = max(s_in - self.half_length + self.reach - LINE_BUFFER, self._held)
+        if s < self._progress + self.reach + VIRTUAL_HALF:  # it would touch the ego: hold it here
+            s = self._progress + self.reach + VIRTUAL_HALF + HOLD_GAP
+        self._held = s
+        x, y = self.route.position(np.array([s]))[0]
+        ahead = self.route.position(np.array([s + 0.5]))[0]
+        return np.array([x, y, math.atan2(ahead[1] - y, ahead[0] - x), 0.0, 0.0])
+
+
+def make_gate(
+    on: bool, predictor: Predictor | None, scenario: Scenario, env: Any
+) -> tuple[JunctionGate | None, Predictor | None]:
+    """``(gate, the agents' predictor)`` for the adapter: off (``on`` False): ``(None, predictor)``;
+    on: the gate judging with ``predictor`` (the paper's for None), the ego's numbers from
+    ``scenario`` and the env's controlled vehicle, and ``predictor`` wrapped in
+    :class:`GatePredictor` (None stays None: the paper's prediction keeps the virtual object
+    standing, v = 0 and omega = 0, with its spread growing)."""
+    if not check_gate(on):
+        return None, predictor
+    judge = ConstantPredictor(scenario) if predictor is None else predictor
+    ego = scenario.ego
+    reach = ego.radius + scenario.objects[0].radius
+    length = float(unwrapped_highway(env).vehicle.LENGTH)
+    gate = JunctionGate(judge, reach, ego.accel_max, 0.5 * length, scenario.dt)
+    gate.wrapper = None if predictor is None else GatePredictor(predictor)
+    return gate, gate.wrapper
+
+
+def is_virtual(rows: np.ndarray, virtual: np.ndarray | None) -> np.ndarray:
+    """``(m,)`` which of the measurements ``rows (m, 5)`` are ``virtual`` (within :data:`MATCH`)."""
+    rows = np.asarray(rows, dtype=float).reshape(-1, 5)
+    if virtual is None:
+        return np.zeros(len(rows), dtype=bool)
+    return np.all(np.abs(rows - virtual[None, :]) <= MATCH, axis=1)
+
+
+def standing(measurement: np.ndarray, steps: int) -> Mixture:
+    """The virtual object's belief: at ``measurement``'s position over n = 0..``steps``, speed 0,
+    spread :data:`VIRTUAL_SIGMA` truncated at :data:`VIRTUAL_HALF`."""
+    n = steps + 1
+    m = np.asarray(measurement, dtype=float)
+    full = lambda value: np.full(n, float(value))  # noqa: E731
+    belief = Belief(
+        x=full(m[0]), y=full(m[1]), theta=full(m[2]), speed=full(0.0),
+        sigma_x=full(VIRTUAL_SIGMA), sigma_y=full(VIRTUAL_SIGMA), sigma_v=full(VIRTUAL_SIGMA),
+        half_x=full(VIRTUAL_HALF), half_y=full(VIRTUAL_HALF),
+        v_lo=full(-VIRTUAL_HALF), v_hi=full(VIRTUAL_HALF), frame=full(m[2]),
+    )  # fmt: skip
+    return Mixture.single(belief, "stop line")
+
+
+class GatePredictor(Predictor):
+    """``inner`` for every road user but the gate's virtual object, which stands still
+    (:func:`standing`); the virtual object is left out of ``inner``'s scene (nobody yields to it)."""
+
+    name = "gate"
+
+    def __init__(self, inner: Predictor) -> None:
+        if not isinstance(inner, Predictor):
+            raise GateError(f"inner must be a Predictor, got {checks.describe(inner)}")
+        self.inner = inner
+        self.max_modes = inner.max_modes
+        self.virtual: np.ndarray | None = None
+        """The virtual object's measurement this step, or None (the gate is open)."""
+
+    def predict(self, measurement: Any, steps: int) -> Mixture:
+        return self.predict_scene(np.asarray(measurement, dtype=float)[None], steps)[0]
+
+    def predict_scene(self, measurements: Any, steps: int) -> list[Mixture]:
+        rows = np.asarray(measurements, dtype=float).reshape(-1, 5)
+        virtual = is_virtual(rows, self.virtual)
+        real = iter(self.inner.predict_scene(rows[~virtual], steps) if (~virtual).any() else [])
+        return [standing(row, steps) if v else next(real) for row, v in zip(rows, virtual, strict=True)]
+
+    def __repr__(self) -> str:
+        return f"GatePredictor({self.inner!r})"

@@ -1,0 +1,220 @@
+"""The junction gate (risk_env.highway.gate): it closes when a vehicle's predicted bound reaches the
+junction's conflict zone before the ego can clear it, opens otherwise, never after the ego
+commits; its virtual object is neither scored (RiskCostWrapper) nor charged to an SMPC's budget."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from risk_env.highway.gate import (
+    VIRTUAL_HALF,
+    GateError,
+    GatePredictor,
+    JunctionGate,
+    check_gate,
+    junction_span,
+    standing,
+    travel_time,
+)
+from risk_env.highway.route import RoutePath
+from risk_env.prediction.belief import Belief
+from risk_env.prediction.mixture import Mixture
+from risk_env.prediction.predictors import Predictor
+from risk_env.risk.estimators import make_estimator
+from risk_env.scenario.scenario import Pose, ReferencePath, Scenario
+
+DT = 0.5
+# a straight route along +x: the approach (0..50 m), the junction (50..70 m), the exit
+ROUTE = RoutePath(
+    lanes=(("o0", "ir0", 0), ("ir0", "il1", 0), ("il1", "o1", 0)),
+    paths=tuple(
+        ReferencePath(goal=Pose(end, 0.0, 0.0), curvature=0.0, lambda_start=-length)
+        for end, length in ((50.0, 50.0), (70.0, 20.0), (120.0, 50.0))
+    ),
+)
+
+
+class Crossing(Predictor):
+    """Each road user drives on at its measured heading and speed; its box grows by ``growth``
+    [m] per second along its heading (a bound on how far ahead it may be)."""
+
+    name = "crossing"
+    max_modes = 1
+
+    def __init__(self, growth: float = 0.0) -> None:
+        self.growth = growth
+        self.calls = 0
+
+    def predict(self, measurement, steps):
+        self.calls += 1
+        x, y, th, v, _ = (float(c) for c in measurement)
+        t = np.arange(steps + 1) * DT
+        full = lambda value: np.full(steps + 1, float(value))  # noqa: E731
+        belief = Belief(
+            x=x + v * t * math.cos(th), y=y + v * t * math.sin(th), theta=full(th), speed=full(v),
+            sigma_x=0.1 + 0.5 * self.growth * t, sigma_y=full(0.1), sigma_v=full(0.1),
+            half_x=0.3 + self.growth * t, half_y=full(1.0), v_lo=full(0.0), v_hi=full(v + 1.0),
+            frame=full(th),
+        )  # fmt: skip
+        return Mixture.single(belief)
+
+
+def gate(predictor: Predictor | None = None, speed_cap: float = 8.0) -> JunctionGate:
+    g = JunctionGate(predictor or Crossing(), reach=4.0, accel=3.0, half_length=2.5, dt=DT)
+    g.reset(ROUTE, Scenario.preset("low", v_ref=speed_cap, v_max=10.0, v_min=0.0))
+    return g
+
+
+def crossing_at(x: float, y0: float, speed: float) -> np.ndarray:
+    """A vehicle at (x, y0) driving toward +y (across the route) at ``speed``."""
+    return np.array([[x, y0, math.pi / 2, speed, 0.0]])
+
+
+def test_the_conflict_zone_is_the_routes_junction_lanes():
+    assert junction_span(ROUTE) == (50.0, 70.0)
+    outside = RoutePath(lanes=(("o0", "o1", 0),), paths=(ROUTE.paths[0],))
+    assert junction_span(outside) is None
+
+
+def test_travel_time_accelerates_to_the_cap():
+    assert travel_time(np.array([0.0, -1.0]), 5.0, 3.0, 8.0).tolist() == [0.0, 0.0]
+    # from rest: 1.5 t^2 = 6 m in 2 s; then 8 m/s after 32/6 m
+    assert travel_time(np.array([6.0]), 0.0, 3.0, 8.0)[0] == pytest.approx(2.0)
+    d_acc = 64.0 / 6.0
+    assert travel_time(np.array([d_acc + 16.0]), 0.0, 3.0, 8.0)[0] == pytest.approx(8.0 / 3.0 + 2.0)
+
+
+def test_the_gate_closes_for_a_vehicle_that_reaches_the_zone_first():
+    g = gate()
+    decision = g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))  # at the zone in ~1.6 s
+    assert decision.closed and not decision.committed and decision.slack < 0.0
+    virtual = g.virtual()
+    # on the route, the ego's front stopping before the line: centre + reach + half length <= 50
+    assert virtual[1] == 0.0 and virtual[3] == 0.0 and virtual[0] - 4.0 + 2.5 <= 50.0
+    assert g.closed_steps == 1
+
+
+def test_the_gate_opens_when_nobody_comes_in_time():
+    g = gate()
+    assert not g.decide(30.0, 5.0, crossing_at(60.0, -300.0, 10.0)).closed  # 30 s away
+    assert not g.decide(30.0, 5.0, np.zeros((0, 5))).closed
+    # the same vehicle, its bound growing ahead of it: now it may come in time
+    growing = gate(Crossing(growth=30.0))
+    assert growing.decide(30.0, 5.0, crossing_at(60.0, -80.0, 10.0)).closed
+    assert not gate().decide(30.0, 5.0, crossing_at(60.0, -80.0, 10.0)).closed
+    # a vehicle that crosses the zone after the ego has cleared it is no conflict
+    assert not gate().decide(44.0, 8.0, crossing_at(55.0, -60.0, 10.0)).closed
+    # far from the junction the gate does not judge
+    assert not gate().decide(-20.0, 5.0, crossing_at(60.0, -20.0, 10.0)).closed
+
+
+def test_the_gate_never_closes_after_the_ego_commits():
+    g = gate()
+    assert not g.decide(45.0, 8.0, crossing_at(60.0, -200.0, 10.0)).closed
+    # open, and it cannot stop before the line any more (8^2 / 6 > 2.5 m left): committed
+    decision = g.decide(45.0, 8.0, crossing_at(60.0, -20.0, 10.0))
+    assert decision.committed and not decision.closed
+    assert not g.decide(47.0, 2.0, crossing_at(60.0, -5.0, 10.0)).closed
+    # a gate that closed while the ego could stop stays closed when it can no longer (no commit)
+    h = gate()
+    assert h.decide(30.0, 8.0, crossing_at(60.0, -20.0, 10.0)).closed
+    late = h.decide(45.0, 8.0, crossing_at(60.0, -15.0, 10.0))
+    assert late.closed and not late.committed
+    # an ego held past the line keeps its virtual object just ahead (never overlapping it)
+    h.decide(48.0, 0.0, crossing_at(60.0, -10.0, 10.0))
+    held = h.virtual()
+    assert held[0] >= 48.0 + 4.0 + VIRTUAL_HALF
+    assert h.decide(48.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed and h.virtual()[0] == held[0]
+
+
+def test_the_gate_predictor_keeps_the_virtual_object_out_of_the_scene():
+    inner = Crossing()
+    wrapped = GatePredictor(inner)
+    g = gate()
+    g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))
+    wrapped.virtual = g.virtual()
+    rows = np.vstack([wrapped.virtual.astype(np.float32), crossing_at(60.0, -20.0, 10.0)])
+    inner.calls = 0
+    mixtures = wrapped.predict_scene(rows, 6)
+    assert inner.calls == 1 and len(mixtures) == 2  # the virtual row never reaches the inner predictor
+    stand = mixtures[0].modes[0].beliefs
+    assert np.all(stand.x == stand.x[0]) and np.all(stand.speed == 0.0)
+    wrapped.virtual = None
+    assert inner.calls == 1 and len(wrapped.predict_scene(rows, 6)) == 2 and inner.calls == 3
+
+
+def test_the_virtual_objects_risk_is_zero_off_its_disc():
+    """An SMPC is charged its exact risk of the applied step: 0 for the virtual object whenever the
+    ego's disc keeps VIRTUAL_HALF clear of it (the risk of a truncated belief outside its box)."""
+    scenario = Scenario.preset(
+        "low", ego_radius=2.0, object_radius=2.0, v_max=10.0, v_min=0.0, v_ref=8.0, severity="probability"
+    )
+    belief = standing(np.array([10.0, 0.0, 0.0, 0.0, 0.0]), 1).modes[0].at(1)
+    estimator = make_estimator("exact", scenario)
+    clear = 10.0 - 4.0 - VIRTUAL_HALF - 0.05
+    assert float(estimator.risk(np.array([clear, 0.0, 0.0, 5.0]), belief)) == 0.0
+    assert float(estimator.risk(np.array([10.0 - 3.0, 0.0, 0.0, 5.0]), belief)) > 0.9
+
+
+def test_bad_values_are_named():
+    with pytest.raises(GateError, match="gate must be True or False"):
+        check_gate("yes")
+    with pytest.raises(GateError, match="accel"):
+        JunctionGate(Crossing(), reach=4.0, accel=0.0, half_length=2.5, dt=DT)
+    with pytest.raises(GateError, match="margin"):
+        JunctionGate(Crossing(), reach=4.0, accel=3.0, half_length=2.5, dt=DT, margin=-1.0)
+    with pytest.raises(GateError, match="threshold"):
+        JunctionGate(Crossing(), reach=4.0, accel=3.0, half_length=2.5, dt=DT, threshold=2.0)
+    with pytest.raises(GateError, match="inner must be a Predictor"):
+        GatePredictor("lane")
+    assert issubclass(GateError, ValueError)
+
+
+def test_the_adapter_plans_against_the_virtual_object_which_is_not_scored():
+    """With the gate forced shut, slot 0 of every observation before the junction is the virtual
+    object; the scored risk (RiskCostWrapper, the env's own vehicles) is the same as without it."""
+    pytest.importorskip("highway_env")
+    from risk_env import observation as layout
+    from risk_env.highway import IntersectionAdapter, RiskCostWrapper, make_intersection_env
+
+    seen: list[np.ndarray] = []
+
+    class Stub:
+        def __init__(self, scenario, object_slots, predictor=None):
+            self.predictor = predictor
+
+        def predict(self, obs, episode_start=None, deterministic=True):
+            seen.append(np.asarray(obs))
+            return np.array([6.0, 0.0]), None
+
+    risks = {}
+    for on in (True, False):
+        env = RiskCostWrapper(make_intersection_env(), estimator="exact", ego_radius=2.0, object_radius=2.0)
+        adapter = IntersectionAdapter(env, Stub, slots=3, gate=on)
+        obs, _ = env.reset(seed=3)
+        adapter.reset()
+        if on:
+            adapter.gate.margin = 1e9  # shut whenever it judges
+        seen.clear()
+        risks[on] = []
+        for _ in range(6):
+            action, _ = adapter.predict(obs)
+            obs, _, terminated, truncated, info = env.step(action)
+            risks[on].append(info["risk"])
+            if terminated or truncated:
+                break
+        first = np.asarray(seen[-1])[layout.EGO_SIZE : layout.EGO_SIZE + layout.SLOT_SIZE]
+        if on:
+            assert adapter.gate.closed_steps > 0 and isinstance(adapter.gate.wrapper, GatePredictor)
+            assert first[0] == 1.0 and first[4] == 0.0  # present, speed 0: the virtual object
+            np.testing.assert_allclose(first[1:], adapter.gate.virtual(), atol=1e-3)
+            assert len(adapter.last_objects) <= 2  # the real vehicles: one slot fewer
+            assert not np.any(np.all(np.abs(adapter.last_objects - adapter.gate.virtual()) < 1e-3, axis=1))
+        else:
+            assert adapter.gate is None
+    assert risks[True] == risks[False]
+    with pytest.raises(GateError, match="gate must be True or False"):
+        IntersectionAdapter(env, Stub, gate="on")
