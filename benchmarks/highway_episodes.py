@@ -7,8 +7,8 @@ every lane of highway-env's map, ``vehicle.on_road`` false, at some step's end) 
 arrays (the scored risk, each MPC step's wall and CPU time, whether every object slot was
 occupied, whether the step built an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`)
 with the episode risk an SMPC with a budget spent by its own estimator and the steps whose fallback
-was a manoeuvre (the rest of the fallback steps applied a soft plan), and the CPU time of the
-driver's reset (where the adapter builds its agents' NLPs, before the episode's first step).
+was a manoeuvre (the rest of the fallback steps applied a soft plan), the steps the junction gate
+was closed (``gate_steps``), and the CPU time of the driver's reset (where the adapter builds its agents' NLPs, before the episode's first step).
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
@@ -157,6 +157,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "manoeuvres": manoeuvres,
         "reset_cpu_s": reset_cpu,
         "spent_risk": float(spent),
+        "gate_steps": int(getattr(getattr(driver, "gate", None), "closed_steps", 0)),
     }
 
 

@@ -28,7 +28,7 @@ EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
     "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road", "off_road_steps", "final_speed",
     "risk_mean", "fallbacks", "manoeuvres", "reset_cpu_s", "spent_risk", "solve_ms_median", "cpu_ms_median",
-    "build_steps",
+    "build_steps", "gate_steps",
 )  # fmt: skip
 """The columns of the per-episode CSV."""
 
