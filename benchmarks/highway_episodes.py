@@ -8,7 +8,8 @@ arrays (the scored risk, each MPC step's wall and CPU time, whether every object
 occupied, whether the step built an NLP in its solve: :class:`~benchmarks.highway_agents.Builder`)
 with the episode risk an SMPC with a budget spent by its own estimator and the steps whose fallback
 was a manoeuvre (the rest of the fallback steps applied a soft plan), the steps the junction gate
-was closed (``gate_steps``), and the CPU time of the driver's reset (where the adapter builds its agents' NLPs, before the episode's first step).
+was closed (``gate_steps``), and the CPU time of the driver's reset (where the adapter builds its
+agents' NLPs, before the episode's first step).
 
 **Collision kinds** (:func:`crash_kind`, from the simulator's states at the start of the step that
 ended in the crash): with d the unit vector from the ego's centre to the centre of the vehicle it
