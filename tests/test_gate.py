@@ -4,12 +4,14 @@ commits; its virtual object is neither scored (RiskCostWrapper) nor charged to a
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 import pytest
 
 from risk_env.highway.gate import (
+    LINE_BUFFER,
     VIRTUAL_HALF,
     GateError,
     GatePredictor,
@@ -92,8 +94,8 @@ def test_the_gate_closes_for_a_vehicle_that_reaches_the_zone_first():
     decision = g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))  # at the zone in ~1.6 s
     assert decision.closed and not decision.committed and decision.slack < 0.0
     virtual = g.virtual()
-    # on the route, the ego's front stopping before the line: centre + reach + half length <= 50
-    assert virtual[1] == 0.0 and virtual[3] == 0.0 and virtual[0] - 4.0 + 2.5 <= 50.0
+    # on the route, the ego's front stopping LINE_BUFFER before the line: centre + half length = 48.5
+    assert virtual[1] == 0.0 and virtual[3] == 0.0 and virtual[0] - 4.0 + 2.5 == 50.0 - LINE_BUFFER
     assert g.closed_steps == 1
 
 
@@ -123,11 +125,9 @@ def test_the_gate_never_closes_after_the_ego_commits():
     assert h.decide(30.0, 8.0, crossing_at(60.0, -20.0, 10.0)).closed
     late = h.decide(45.0, 8.0, crossing_at(60.0, -15.0, 10.0))
     assert late.closed and not late.committed
-    # an ego held past the line keeps its virtual object just ahead (never overlapping it)
-    h.decide(48.0, 0.0, crossing_at(60.0, -10.0, 10.0))
-    held = h.virtual()
-    assert held[0] >= 48.0 + 4.0 + VIRTUAL_HALF
-    assert h.decide(48.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed and h.virtual()[0] == held[0]
+    # it stays put (the virtual object where it was) until the gate opens; past the object it commits
+    assert h.decide(49.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed and h.virtual()[0] == 50.0
+    assert h.decide(50.5, 0.0, crossing_at(60.0, -10.0, 10.0)).committed
 
 
 def test_the_gate_predictor_keeps_the_virtual_object_out_of_the_scene():
@@ -157,6 +157,34 @@ def test_the_virtual_objects_risk_is_zero_off_its_disc():
     clear = 10.0 - 4.0 - VIRTUAL_HALF - 0.05
     assert float(estimator.risk(np.array([clear, 0.0, 0.0, 5.0]), belief)) == 0.0
     assert float(estimator.risk(np.array([10.0 - 3.0, 0.0, 0.0, 5.0]), belief)) > 0.9
+
+
+def test_the_virtual_objects_risk_is_given_back_to_the_budget():
+    """An SMPC charges its budget the whole risk of the applied step (report.risk_fn, over every
+    slot's rows); the gate gives back the virtual object's share (row 0) when it was closed."""
+
+    def risk(ego_states, futures, data):  # the RiskFunction: summed over the present rows
+        return np.array([sum({"virtual": 0.7, "car": 0.2}[f] for f in futures if f is not None)])
+
+    class Report:
+        risk_fn = functools.partial(risk, np.zeros((6, 4)), ["virtual", None, None, "car"], None)
+
+    class Budgeted:
+        risk_budget = 0.05
+
+        def __init__(self):
+            self._spent = {0: 0.9 + 0.5}  # this step's 0.9, 0.5 before
+
+    g, agent = gate(), Budgeted()
+    g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))
+    assert g.refund(agent, Report()) == pytest.approx(0.7)
+    assert agent._spent[0] == pytest.approx(0.7) and g.refunded == pytest.approx(0.7)
+    g.decide(30.0, 5.0, crossing_at(60.0, -300.0, 10.0))  # open: nothing virtual to give back
+    assert g.refund(agent, Report()) == 0.0 and agent._spent[0] == pytest.approx(0.7)
+    no_budget = Budgeted()
+    no_budget.risk_budget = None
+    g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))
+    assert g.refund(no_budget, Report()) == 0.0
 
 
 def test_bad_values_are_named():

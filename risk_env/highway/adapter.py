@@ -206,8 +206,7 @@ class IntersectionAdapter:
         named one is built on the road network at the first episode (the map: the same at every
         reset)."""
         self._agents: dict[ReferencePath, Any] = {}
-        self.gate: JunctionGate | None = None
-        """The junction gate (None: off; built with the predictor at the first episode)."""
+        self.gate: JunctionGate | None = None  # the junction gate (None: off), at the first episode
         self._gate_on = check_gate(gate)
         self._agent_predictor: Predictor | None = None
         self._ready = False
@@ -304,6 +303,7 @@ class IntersectionAdapter:
         self._fresh = False
         self.last_observation = obs
         self._last_solve = getattr(agent, "last_solve", None)
+        self.gate is None or self.gate.refund(agent, self._last_solve)  # not charged to a budget
         self.last_solves = [self._last_solve]
         v, omega = (float(a) for a in action)
         highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)

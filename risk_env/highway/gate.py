@@ -9,13 +9,13 @@ junction, each step, whether the ego can cross all of it first:
 - **The conflict zone** is the ego's route inside the junction: its lanes from a node
   ``ir*`` (highway-env's intersection entry) to the next, sampled every metre,
   $s_{in} \le s_j \le s_{out}$.
-- **The ego** clears point $j$ when its centre is ``reach`` = $r_{ego} + r_{obj}$ past it, at
+- **The ego** clears point $j$ when its centre is :data:`GATE_CLEARANCE` past it, at
   $t^e_j$, driving from its speed at its largest acceleration ``accel`` up to ``speed_cap`` (the
   planner's $v_{ref}$ there).
 - **Each other vehicle** reaches point $j$ at $t^o_j$, the first time one of its predicted modes of
   weight at least :data:`GATE_THRESHOLD` (their truncation boxes: the interval predictor's fast
-  run bounds the box ahead) comes within ``reach`` of it, over a horizon long enough for the ego to
-  cross (at most :data:`GATE_STEPS` steps), linearly between steps.
+  run bounds the box ahead) comes within :data:`GATE_CLEARANCE` of it, over a horizon long enough
+  for the ego to cross (at most :data:`GATE_STEPS` steps), linearly between steps.
 - The gate **closes** when some vehicle reaches some point before the ego has cleared it with
   :data:`GATE_MARGIN` to spare, $t^o_j < t^e_j + $ margin; then the MPC is handed a **virtual
   stationary object** at the stop line (:meth:`JunctionGate.virtual`), in one of its object slots,
@@ -23,13 +23,15 @@ junction, each step, whether the ego can cross all of it first:
 - The ego **commits** once, the gate open, it cannot stop its front before the junction at
   ``accel`` ($v^2 / 2a$ beyond the distance left), or once its front is past the line: from then on
   the gate stays open this episode. A gate that closes when the ego can no longer stop before the
-  line stays closed: the MPC brakes as hard as it can, and an ego that stopped past the line is held
-  where it is (the virtual object just ahead of it) until the gate opens.
+  line stays closed: the MPC brakes as hard as it can (its soft plan, the virtual object ahead) and
+  waits where it stops; only an ego whose centre passes the virtual object's commits.
 
 The virtual object is predicted standing still with the spread :data:`VIRTUAL_SIGMA`, truncated at
-:data:`VIRTUAL_HALF` (:class:`GatePredictor`): its probability-severity risk is exactly 0 while the
-ego's disc stays :data:`VIRTUAL_HALF` clear of its disc, so an SMPC's spent budget is charged
-nothing for it when the plan keeps off it (the adapter records what was: ``gate_charge``).
+:data:`VIRTUAL_HALF` (:class:`GatePredictor`): its risk is exactly 0 while the ego's disc stays
+:data:`VIRTUAL_HALF` clear of its disc. A soft plan that brakes too late does come closer, and an
+SMPC charges its budget the whole risk of the applied step: :meth:`JunctionGate.refund` gives the
+virtual object's share back (measured: on SMPC seed 0 it was 1.137 of the 1.138 spent). The scored
+risk (:class:`~risk_env.highway.RiskCostWrapper`) sees highway-env's vehicles only.
 """
 
 from __future__ import annotations
@@ -51,6 +53,9 @@ from risk_env.scenario.scenario import Scenario
 
 JUNCTION_PREFIX = "ir"
 """A route lane from a node named so lies inside highway-env's intersection (``ir*`` -> ``il*``)."""
+GATE_CLEARANCE = 3.0
+"""Distance [m] between centres the gate keeps (at most ``reach``): two 2 m wide cars side by side
+touch at 2 m; the discs' 4 m would make a car leaving in the lane beside the entry a conflict."""
 GATE_MARGIN = 0.5
 """Time [s] the ego must have cleared a point of the zone before another vehicle reaches it."""
 GATE_THRESHOLD = 0.05
@@ -68,8 +73,6 @@ VIRTUAL_HALF = 0.15
 LINE_BUFFER = 1.5
 """How far [m] before the line the virtual object stops the ego's front (the plan brakes late and
 highway-env's car lags it)."""
-HOLD_GAP = 0.5
-"""Gap [m] between the ego's disc and the virtual object when the object holds an ego past the line."""
 MATCH = 1e-3
 """Largest difference (float32 observation rounding) between a measurement and the virtual one."""
 
@@ -174,13 +177,17 @@ class JunctionGate:
         self.reach, self.accel, self.speed_cap = float(reach), float(accel), math.inf
         self.half_length, self.dt = float(half_length), float(dt)
         self.margin, self.threshold = float(margin), float(threshold)
+        self.clearance = min(self.reach, GATE_CLEARANCE)
+        """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
+        the ego's centre has cleared a point)."""
         self.route: RoutePath | None = None
         self.span: tuple[float, float] | None = None
         self.committed = False
         self.closed_steps = 0
         """Steps this episode the gate was closed."""
         self.last = GateDecision(False, False)
-        self._progress = self._held = -math.inf
+        self.refunded = 0.0
+        """Risk charged to an SMPC's budget for the virtual object and given back (:meth:`refund`)."""
         self.wrapper: GatePredictor | None = None
         """The agents' predictor the gate tells its virtual object (:meth:`step`), if any."""
 
@@ -191,7 +198,6 @@ class JunctionGate:
         self.route, self.span = route, junction_span(route)
         self.speed_cap = min(lane_scenario(scenario, path).ego.v_ref for path in route.paths)
         self.committed, self.closed_steps = False, 0
-        self._progress = self._held = -math.inf
         self.last = GateDecision(False, self.span is None)
 
     def decide(self, progress: float, speed: float, others: np.ndarray) -> GateDecision:
@@ -202,10 +208,10 @@ class JunctionGate:
             return self.last
         s_in, s_out = self.span
         left = s_in - self.half_length - progress  # the centre's distance to its stop
-        # an ego that can no longer stop (or is past the line) commits only if the gate let it come;
-        # else it brakes as hard as it can and waits at the line or where it stopped past it
-        self._progress = float(progress)
-        if not self.last.closed and (left < 0.0 or max(speed, 0.0) ** 2 / (2.0 * self.accel) > left):
+        # an ego that can no longer stop (or is past the line) commits only if the gate let it come,
+        # else it brakes as hard as it can and waits where it stops (unless past the virtual object)
+        cannot_stop = left < 0.0 or max(speed, 0.0) ** 2 / (2.0 * self.accel) > left
+        if (cannot_stop and not self.last.closed) or progress > self._line():
             self.committed = True
             self.last = GateDecision(False, True)
             return self.last
@@ -214,11 +220,11 @@ class JunctionGate:
             return self.last
         s = np.arange(s_in, s_out + 1e-9, 1.0)
         points = self.route.position(s)
-        ego_clear = travel_time(s + self.reach - progress, speed, self.accel, self.speed_cap)
+        ego_clear = travel_time(s + self.clearance - progress, speed, self.accel, self.speed_cap)
         steps = min(GATE_STEPS, math.ceil((float(ego_clear.max()) + self.margin) / self.dt))
         slack = math.inf
         for mixture in self.predictor.predict_scene(np.asarray(others, dtype=float), steps):
-            reach = first_reach(mixture, points, self.reach, self.dt, self.threshold)
+            reach = first_reach(mixture, points, self.clearance, self.dt, self.threshold)
             slack = min(slack, float(np.min(reach - ego_clear)))
         closed = slack < self.margin
         self.closed_steps += closed
@@ -233,16 +239,30 @@ class JunctionGate:
             self.wrapper.virtual = virtual
         return np.zeros((0, 5)) if virtual is None else virtual[None]
 
+    def _line(self) -> float:
+        """Route arc length [m] of the virtual object."""
+        return self.span[0] - self.half_length + self.reach - LINE_BUFFER
+
+    def refund(self, agent: Any, report: Any) -> float:
+        """Give back to ``agent`` (an SMPC with a budget) the risk its last step (``report``) charged for
+        the virtual object (slot 0, one mode: risk row 0 of the report's ``risk_fn``, the agent's
+        own risk of the applied step); the amount. The SMPC has no public hook for this: its private
+        ``_spent`` (batch entry 0) is corrected."""
+        if not self.last.closed or report is None or getattr(agent, "risk_budget", None) is None:
+            return 0.0
+        risk_fn = report.risk_fn
+        ego_states, futures, data = risk_fn.args
+        only = [f if row == 0 else None for row, f in enumerate(futures)]
+        charged = float(np.asarray(risk_fn.func(ego_states, only, data))[0])
+        agent._spent[0] = agent._spent.get(0, 0.0) - charged
+        self.refunded += charged
+        return charged
+
     def virtual(self) -> np.ndarray:
         """The virtual object's measurement ``(5,)``: standing on the ego's route where the ego's disc
-        touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry (or, the ego past
-        that, just ahead of the ego's disc, where it then stays: it holds the ego), heading along the
-        route."""
-        s_in, _ = self.span
-        s = max(s_in - self.half_length + self.reach - LINE_BUFFER, self._held)
-        if s < self._progress + self.reach + VIRTUAL_HALF:  # it would touch the ego: hold it here
-            s = self._progress + self.reach + VIRTUAL_HALF + HOLD_GAP
-        self._held = s
+        touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry, heading along
+        the route."""
+        s = self._line()
         x, y = self.route.position(np.array([s]))[0]
         ahead = self.route.position(np.array([s + 0.5]))[0]
         return np.array([x, y, math.atan2(ahead[1] - y, ahead[0] - x), 0.0, 0.0])
