@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from risk_env.highway.gate import (
+    HOLD_GAP,
     LINE_BUFFER,
     VIRTUAL_HALF,
     GateError,
@@ -125,9 +126,13 @@ def test_the_gate_never_closes_after_the_ego_commits():
     assert h.decide(30.0, 8.0, crossing_at(60.0, -20.0, 10.0)).closed
     late = h.decide(45.0, 8.0, crossing_at(60.0, -15.0, 10.0))
     assert late.closed and not late.committed
-    # it stays put (the virtual object where it was) until the gate opens; past the object it commits
-    assert h.decide(49.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed and h.virtual()[0] == 50.0
-    assert h.decide(50.5, 0.0, crossing_at(60.0, -10.0, 10.0)).committed
+    # an ego stopped past the line is held: the virtual object just ahead of its disc, staying there
+    assert h.decide(49.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed
+    held = h.virtual()[0]
+    assert held == pytest.approx(49.0 + 4.0 + VIRTUAL_HALF + HOLD_GAP)
+    assert h.decide(49.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed and h.virtual()[0] == held
+    late = h.decide(52.0, 0.0, crossing_at(60.0, -10.0, 10.0))
+    assert late.closed and not late.committed and h.virtual()[0] > 52.0 + 4.0
 
 
 def test_the_gate_predictor_keeps_the_virtual_object_out_of_the_scene():
