@@ -251,3 +251,18 @@ def test_the_adapter_plans_against_the_virtual_object_which_is_not_scored():
     assert risks[True] == risks[False]
     with pytest.raises(GateError, match="gate must be True or False"):
         IntersectionAdapter(env, Stub, gate="on")
+
+
+def test_the_commands_gate_option_reaches_the_adapter():
+    pytest.importorskip("highway_env")
+    from benchmarks import highway_frontier, highway_intersection
+    from benchmarks.highway_agents import make_driver, resolve
+    from risk_env.highway import make_intersection_env
+
+    assert highway_intersection.parse_args([]).gate is True
+    assert highway_frontier.parse_args(["--no-gate"]).gate is False
+    env = make_intersection_env()
+    for flag, on in (("--gate", True), ("--no-gate", False)):
+        args = highway_intersection.parse_args([flag])
+        driver = make_driver(resolve("rmpc", args.severity, args.budget), env, args, "lane")
+        assert driver._gate_on is on
