@@ -174,11 +174,17 @@ def test_the_virtual_objects_risk_is_given_back_to_the_budget():
     class Report:
         risk_fn = functools.partial(risk, np.zeros((6, 4)), ["virtual", None, None, "car"], None)
 
-    class Budgeted:
+    class Budgeted:  # SMPC's budget API: spent_risk and refund
         risk_budget = 0.05
 
         def __init__(self):
             self._spent = {0: 0.9 + 0.5}  # this step's 0.9, 0.5 before
+
+        def spent_risk(self, index: int = 0) -> float:
+            return self._spent[index]
+
+        def refund(self, risk: float, index: int = 0) -> None:
+            self._spent[index] -= risk
 
     g, agent = gate(), Budgeted()
     g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))
@@ -266,3 +272,16 @@ def test_the_commands_gate_option_reaches_the_adapter():
         args = highway_intersection.parse_args([flag])
         driver = make_driver(resolve("rmpc", args.severity, args.budget), env, args, "lane")
         assert driver._gate_on is on
+
+
+def test_the_smpc_takes_back_a_refund_within_what_it_spent():
+    from agents import SMPC
+
+    agent = SMPC(Scenario.preset("low", severity="probability"), risk_budget=0.05, max_solve_time=math.inf)
+    agent._spent[0] = 0.03  # as after steps that spent 0.03
+    agent.refund(0.01)
+    assert agent.spent_risk() == pytest.approx(0.02)
+    for bad in (-0.001, 0.5, math.nan):
+        with pytest.raises(ValueError, match="risk"):
+            agent.refund(bad)
+    assert agent.spent_risk() == pytest.approx(0.02)

@@ -190,6 +190,16 @@ class SMPC(PathFollowingMPC):
         actions applied so far in its episode, by the agent's own estimator (0 without a budget)."""
         return self._spent.get(index, 0.0)
 
+    def refund(self, risk: float, index: int = 0) -> None:
+        """Take back ``risk`` (>= 0, the severity's unit) of batch entry ``index``'s spent risk: what
+        its last step charged for an object that is no road user (a virtual stop line,
+        :mod:`risk_env.highway.gate`). ``ValueError`` for a refund above what was spent."""
+        risk = checks.real("risk", risk)
+        spent = self._spent.get(index, 0.0)
+        if not 0.0 <= risk <= spent * (1.0 + 1e-9) + 1e-15:
+            raise ValueError(f"risk must be in [0, spent = {spent:g}], got {risk!r}")
+        self._spent[index] = max(spent - risk, 0.0)
+
     @property
     def samples(self) -> int | None:
         """J, the Monte Carlo draws per step (None for the exact risk)."""

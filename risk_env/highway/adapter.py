@@ -156,8 +156,7 @@ class IntersectionAdapter:
             (the paper's: constant speed and turn rate) or any :class:`risk_env.prediction.Predictor`;
             handed to ``make_agent`` as ``predictor=`` (not for ``"constant"``).
         warm_up: when the route is known, build every lane's agent and every NLP it can run
-            (``prepare()``), so that no step builds one (:mod:`risk_env.highway.lane_agents`);
-            False: each when first needed, inside a step.
+            (``prepare()``; :mod:`risk_env.highway.lane_agents`); False: each when first needed.
         gate: the junction gate (:mod:`risk_env.highway.gate`, default on): before the junction, the
             MPC gets a virtual stationary object at the stop line whenever the ego could not cross
             the junction before another vehicle's predicted bounds reach its path; False: none.
@@ -303,7 +302,8 @@ class IntersectionAdapter:
         self._fresh = False
         self.last_observation = obs
         self._last_solve = getattr(agent, "last_solve", None)
-        self.gate is None or self.gate.refund(agent, self._last_solve)  # not charged to a budget
+        if self.gate is not None:  # the virtual object's risk is not charged to a budget
+            self.gate.refund(agent, self._last_solve)
         self.last_solves = [self._last_solve]
         v, omega = (float(a) for a in action)
         highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)

@@ -253,15 +253,14 @@ class JunctionGate:
     def refund(self, agent: Any, report: Any) -> float:
         """Give back to ``agent`` (an SMPC with a budget) the risk its last step (``report``) charged for
         the virtual object (slot 0, one mode: risk row 0 of the report's ``risk_fn``, the agent's
-        own risk of the applied step); the amount. The SMPC has no public hook for this: its private
-        ``_spent`` (batch entry 0) is corrected."""
+        own risk of the applied step); the amount, through :meth:`agents.mpc.smpc.SMPC.refund`."""
         if not self.last.closed or report is None or getattr(agent, "risk_budget", None) is None:
             return 0.0
         risk_fn = report.risk_fn
         ego_states, futures, data = risk_fn.args
         only = [f if row == 0 else None for row, f in enumerate(futures)]
         charged = float(np.asarray(risk_fn.func(ego_states, only, data))[0])
-        agent._spent[0] = agent._spent.get(0, 0.0) - charged
+        agent.refund(min(charged, agent.spent_risk()))
         self.refunded += charged
         return charged
 
