@@ -39,12 +39,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 import numpy as np
 
-from risk_env.highway.lanes.routes import interpolate
-from risk_env.highway.lanes.speed import Agents, SpeedModel, _stack
+from risk_env.highway.lanes.speed import Agents, SpeedModel
 from risk_env.highway.lanes.table import LaneTable
 
 LONGITUDINAL = ("reach", "interval")
@@ -90,10 +88,9 @@ class IntervalModel:
 
 def lane_only(model: SpeedModel) -> SpeedModel:
     """``model`` with highway-env's leader search on the road user's own lane only (the fast run's)."""
-    out = SpeedModel.__new__(SpeedModel)
-    out.network, out.model = model.network, model.model
-    out.table = LaneTable(model.network, connected=False) if model.model.connected_lanes else model.table
-    return out
+    if not model.model.connected_lanes:
+        return model
+    return SpeedModel(model.network, model.model, LaneTable(model.network, connected=False))
 
 
 def interval_bounds(
@@ -114,8 +111,7 @@ def interval_bounds(
     count = len(agents.vehicle)
     ego = np.zeros(count, dtype=bool) if ego is None else np.asarray(ego, dtype=bool)
     low, high = (float(x) for x in intervals.delta)
-    fast_s, fast_v = _run(
-        lane_only(model) if lane_model is None else lane_model,
+    fast_s, fast_v = (lane_only(model) if lane_model is None else lane_model).run(
         agents,
         steps,
         dt,
@@ -125,8 +121,7 @@ def interval_bounds(
         partners=np.flatnonzero(agents.representative),
         braking=ego if intervals.ego_leads else np.zeros(count, dtype=bool),
     )
-    slow_s, slow_v = _run(
-        model,
+    slow_s, slow_v = model.run(
         agents,
         steps,
         dt,
@@ -143,60 +138,3 @@ def interval_bounds(
     v_lo = np.minimum(np.minimum(slow_v, fast_v), v)
     v_hi = np.maximum(np.maximum(slow_v, fast_v), v)
     return s_lo, s_hi, v_lo, v_hi
-
-
-def _run(
-    speed: SpeedModel,
-    agents: Agents,
-    steps: int,
-    dt: float,
-    delta: np.ndarray,
-    target: np.ndarray,
-    yielding: bool,
-    partners: np.ndarray,
-    braking: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`SpeedModel.run` with per-agent ``delta`` and initial desired speed ``target`` [m/s]
-    (capped by the lane's limit), the leaders and yielding partners among ``partners`` (indices),
-    and the agents ``braking`` at full braking (to a stop): ``(A, steps+1)`` arc lengths and speeds."""
-    m, table = speed.model, speed.table
-    count = len(agents.vehicle)
-    samples = _stack([route.samples for route in agents.routes])
-    depth = max(len(route.lanes) for route in agents.routes)
-    offsets = np.full((count, depth), np.inf)
-    lane_ids = np.zeros((count, depth), dtype=int)
-    for a, route in enumerate(agents.routes):
-        offsets[a, : len(route.lanes)] = route.offsets
-        lane_ids[a, : len(route.lanes)] = [table.id[index] for index in route.lanes]
-    numbers = SimpleNamespace(**{**vars(m), "delta": delta})
-    model = SpeedModel.__new__(SpeedModel)
-    model.network, model.model, model.table = speed.network, numbers, table
-    s, v = agents.s.astype(float).copy(), agents.v.astype(float).copy()
-    rows = np.arange(count)
-    which = np.maximum((s[:, None] >= offsets).sum(axis=1) - 1, 0)
-    wanted = np.minimum(target, table.limit[lane_ids[rows, which]])
-    yielded = np.zeros(count, dtype=bool)
-    s_out, v_out = np.empty((count, steps + 1)), np.empty((count, steps + 1))
-    s_out[:, 0], v_out[:, 0] = s, v
-    h = dt / m.substeps
-    ticks = max(int(round(m.regulation_period / h)), 1)
-    for k in range(steps * m.substeps):
-        which = np.maximum((s[:, None] >= offsets).sum(axis=1) - 1, 0)
-        lane = lane_ids[rows, which]
-        local = s - offsets[rows, which]
-        xyh = interpolate(samples, s)
-        heading = xyh[:, 2]
-        normal = np.column_stack([-np.sin(heading), np.cos(heading)])
-        points = xyh[:, :2] + (agents.r * math.exp(-k * h / m.lateral_time))[:, None] * normal
-        if yielding and k % ticks == 0:
-            now = model._yielders(agents, samples, s, v, points, heading, lane, partners)
-            wanted = np.where(now, 0.0, np.where(yielded, table.limit[lane], wanted))
-            yielded = now
-        acceleration = model._idm(agents, v, wanted, points, heading, lane, local, partners)
-        stop = np.minimum(v, 0.0)
-        acceleration = np.where(braking, np.maximum(-m.max_acceleration, (stop - v) / h), acceleration)
-        s = s + v * h
-        v = v + acceleration * h
-        if (k + 1) % m.substeps == 0:
-            s_out[:, (k + 1) // m.substeps], v_out[:, (k + 1) // m.substeps] = s, v
-    return s_out, v_out

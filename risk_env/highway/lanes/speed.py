@@ -133,13 +133,29 @@ def _not_zero(x: np.ndarray) -> np.ndarray:
 class SpeedModel:
     """Moves :class:`Agents` over the horizon with a :class:`TrafficModel` (module docstring)."""
 
-    def __init__(self, network: Any, model: TrafficModel) -> None:
+    def __init__(self, network: Any, model: TrafficModel, table: LaneTable | None = None) -> None:
         self.network = network
         self.model = model
-        self.table = LaneTable(network, model.connected_lanes)
+        self.table = LaneTable(network, model.connected_lanes) if table is None else table
+        """The lanes' table (``table``: another leader search than ``model.connected_lanes``)."""
 
-    def run(self, agents: Agents, steps: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Arc lengths and speeds ``(A, steps+1)`` of every agent at n = 0..steps (step ``dt`` [s])."""
+    def run(
+        self,
+        agents: Agents,
+        steps: int,
+        dt: float,
+        delta: float | np.ndarray | None = None,
+        target: np.ndarray | None = None,
+        yielding: bool | None = None,
+        partners: np.ndarray | None = None,
+        braking: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Arc lengths and speeds ``(A, steps+1)`` of every agent at n = 0..steps (step ``dt`` [s]).
+        By default with the model's numbers; the interval prediction sets, per agent, the IDM's
+        ``delta`` and the initial desired speed ``target`` [m/s] (capped by the lane's limit; default
+        the speed, at least the cruise speed), whether anyone ``yielding`` follows the regulation's
+        rule, the ``partners`` (indices) that lead and are yielded to (default the representatives)
+        and the agents ``braking`` at full braking to a stop."""
         m, table = self.model, self.table
         count = len(agents.vehicle)
         samples = _stack([route.samples for route in agents.routes])
@@ -152,13 +168,15 @@ class SpeedModel:
         s, v = agents.s.astype(float).copy(), agents.v.astype(float).copy()
         rows = np.arange(count)
         which = np.maximum((s[:, None] >= offsets).sum(axis=1) - 1, 0)
-        target = np.minimum(np.maximum(v, m.cruise_speed), table.limit[lane_ids[rows, which]])
+        wanted = np.maximum(v, m.cruise_speed) if target is None else target
+        target = np.minimum(wanted, table.limit[lane_ids[rows, which]])
         yielded = np.zeros(count, dtype=bool)
         s_out, v_out = np.empty((count, steps + 1)), np.empty((count, steps + 1))
         s_out[:, 0], v_out[:, 0] = s, v
         h = dt / m.substeps
         ticks = max(int(round(m.regulation_period / h)), 1)
-        reps = np.flatnonzero(agents.representative)
+        reps = np.flatnonzero(agents.representative) if partners is None else partners
+        yielding = m.yielding if yielding is None else yielding
         for k in range(steps * m.substeps):
             which = np.maximum((s[:, None] >= offsets).sum(axis=1) - 1, 0)
             lane = lane_ids[rows, which]
@@ -167,11 +185,14 @@ class SpeedModel:
             heading = xyh[:, 2]
             normal = np.column_stack([-np.sin(heading), np.cos(heading)])
             points = xyh[:, :2] + (agents.r * math.exp(-k * h / m.lateral_time))[:, None] * normal
-            if m.yielding and k % ticks == 0:
+            if yielding and k % ticks == 0:
                 now = self._yielders(agents, samples, s, v, points, heading, lane, reps)
                 target = np.where(now, 0.0, np.where(yielded, table.limit[lane], target))
                 yielded = now
-            acceleration = self._idm(agents, v, target, points, heading, lane, local, reps)
+            acceleration = self._idm(agents, v, target, points, heading, lane, local, reps, delta)
+            if braking is not None:
+                to_stop = np.maximum(-m.max_acceleration, (np.minimum(v, 0.0) - v) / h)
+                acceleration = np.where(braking, to_stop, acceleration)
             s = s + v * h
             v = v + acceleration * h
             if (k + 1) % m.substeps == 0:
@@ -188,8 +209,10 @@ class SpeedModel:
         lane: np.ndarray,
         local: np.ndarray,
         reps: np.ndarray,
+        delta: float | np.ndarray | None = None,
     ) -> np.ndarray:
-        """highway-env's ``IDMVehicle.acceleration`` of every agent behind its leader."""
+        """highway-env's ``IDMVehicle.acceleration`` of every agent behind its leader (``delta``: the
+        exponent, per agent or the model's)."""
         m, table = self.model, self.table
         count = len(v)
         coords, on = table.coordinates(points[reps])  # (L, B)
@@ -214,7 +237,7 @@ class SpeedModel:
         closing = np.einsum("ij,ij->i", v[:, None] * direction - v[ahead, None] * direction[ahead], direction)
         wanted = np.clip(target, 0.0, table.limit[lane])
         acceleration = m.comfort_acceleration * (
-            1 - np.power(np.maximum(v, 0.0) / np.abs(_not_zero(wanted)), m.delta)
+            1 - np.power(np.maximum(v, 0.0) / np.abs(_not_zero(wanted)), m.delta if delta is None else delta)
         )
         d_star = (
             m.distance_wanted
