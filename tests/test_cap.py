@@ -305,3 +305,34 @@ def test_a_monte_carlo_pilot_takes_a_budgets_bound_within_the_severitys_largest_
     obs, _ = env.reset(seed=2)
     action, _ = agent.predict(obs)
     assert np.all(np.isfinite(action)) and agent._pilot.risk_tolerance == 1.0
+
+
+def test_a_capped_agent_builds_at_construction_every_nlp_a_step_can_run() -> None:
+    """A build inside a step took 0.3 to 1.3 s against a 100 ms cap (the stress family's steps over
+    the cap): a capped agent prepares at construction, so that ``prepare()`` then builds nothing;
+    uncapped, the same agent builds the shared budget's zero-tolerance form lazily (so the counter
+    can fail this test)."""
+    from agents.mpc.nlp import solver
+
+    scenario = Scenario.preset("low", severity="probability").replace(horizon=3)
+    options = {"risk_budget": 0.05, "risk_tolerance": math.inf}
+    lazy = SMPC(scenario, max_solve_time=math.inf, **options)
+    built = solver.CACHE_COUNTS.builds
+    assert lazy.prepare() > 0 and solver.CACHE_COUNTS.builds > built
+    capped = SMPC(scenario, max_solve_time=0.1, **options)
+    built = solver.CACHE_COUNTS.builds
+    assert capped.prepare() == 0.0 and solver.CACHE_COUNTS.builds == built
+
+
+def test_the_monte_carlo_pilot_is_built_in_the_form_it_runs() -> None:
+    """The pilot runs at the agent's positive tolerance only (the ``"general"`` form), whatever the
+    scenario's tolerance: it is built so, at construction when capped."""
+    from agents.mpc.nlp import solver
+
+    scenario = Scenario.preset("low", severity="probability", risk_tolerance=0.0).replace(horizon=3)
+    agent = SMPC(
+        scenario, risk="monte_carlo", samples=40, pilot_samples=20, risk_tolerance=0.01, max_solve_time=0.1
+    )
+    assert {v for v, _ in agent._pilot._problems} == {"free", "general", "general_soft"}
+    built = solver.CACHE_COUNTS.builds
+    assert agent.prepare() == 0.0 and solver.CACHE_COUNTS.builds == built

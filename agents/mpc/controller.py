@@ -190,11 +190,12 @@ class PathFollowingMPC(RiskForm):
         self._manoeuvre_time = MANOEUVRE_TIME
         variant = self._risk_variant()
         variants = ("free", variant, soft_variant(variant))
-        # given beliefs: the NLPs of as many rows as a step needs are built when it first does
+        # given beliefs: the NLPs of as many rows as a step needs are built when it first does, but
+        # a capped step must never build (the cap would cut it): a capped agent builds all now
         built = [self._problem(v, 1 if self._slots.given else None) for v in variants]
-        self.build_time = sum(p.build_time for p in built)
-        """Seconds spent building (with jit: compiling) the solvers at construction; 0 when they came
-        from the process-wide cache."""
+        prepared = self.prepare() if math.isfinite(self.max_solve_time) else 0.0
+        self.build_time = sum(p.build_time for p in built) + prepared
+        """Seconds spent building the solvers at construction (capped: all, :meth:`prepare`)."""
 
     # ------------------------------------------------------------------ public API
     @property
@@ -228,9 +229,9 @@ class PathFollowingMPC(RiskForm):
         return cls(scenario, **kwargs)
 
     def prepare(self) -> float:
-        """Build every NLP a step can run, so that none builds one (the wall-time cap would cut it):
-        the free problem and each form a step may take (:meth:`_step_forms`), hard and soft, at every
-        row count of :meth:`agents.mpc.objects.Slots.capacities`. Returns the seconds spent building."""
+        """Build every NLP a step can run (a capped agent did at construction): the free problem and
+        each form of :meth:`_step_forms`, hard and soft, at every row count of
+        :meth:`agents.mpc.objects.Slots.capacities`. Returns the seconds spent building."""
         rows, known = self._slots.capacities(self._risk_parameter_shape()[0] > 0), set(self._problems)
         forms = [v for f in sorted(self._step_forms()) for v in (f, soft_variant(f))]
         _ = [self._problem(v, r) for v in ("free", *forms) for r in rows]
@@ -258,8 +259,7 @@ class PathFollowingMPC(RiskForm):
         present object's risk bound (an observation with another slot count:
         ``ValueError``). ``episode_start`` (bool or ``(B,)``) drops the warm start;
         so does a new episode detected from the observation (its last applied input is not the
-        action returned, or the ego is over 1 m from where the plan put it).
-        """
+        action returned, or the ego is over 1 m from where the plan put it)."""
         size = ob.size(self.slots)
         forget = lambda i: self._memory.pop(i, None)  # noqa: E731  (a new episode of batch entry i)
         actions, reports = predict_each(observation, size, episode_start, forget, self._step)

@@ -145,10 +145,12 @@ class SMPC(PathFollowingMPC):
         if risk == "monte_carlo" and pilot_samples and pilot_samples < self.estimator.samples:
             est = self.estimator
             options = {k: v for k, v in kwargs.items() if k not in ("risk_tolerance", "seed")}
-            # the pilot plans a first guess only: without the budget's and the weight's terms
+            # the pilot plans a first guess only: without the budget's and the weight's terms;
+            # at a positive tolerance (each call sets the agent's): its forms are "general"'s
             self._pilot = SMPC(
                 scenario,
                 risk="monte_carlo",
+                risk_tolerance=min(est.severity.scale, est.severity.upper_bound),
                 samples=pilot_samples,
                 bandwidth=est.bandwidth,
                 smoothing=est.smoothing,

@@ -25,8 +25,6 @@ LONG_CALL = 20
 """Calls of at least this many iterations are also remembered apart: the calls that run into a
 rung's limit are long ones, and a failing call's iterations cost more (line searches,
 restoration) than a converging one's."""
-SKIP_DISCOUNT = 0.8
-"""Factor on the estimate after each call that did not fit (reset by the next measured call)."""
 END_SHARE = 0.1
 """Share of the cap no solver call may use: the step's own work after its last call, and the
 error of the calls' predicted times."""
@@ -34,6 +32,13 @@ QUANTILE = 90.0
 """The estimate is this percentile of the remembered times per iteration ..."""
 SAFETY = 1.3
 """... times this factor (a call's iterations differ in cost: line searches, restoration)."""
+SKIP_DISCOUNT = 0.8
+"""Factor on the estimate after each call that did not fit (reset by the next measured call) ..."""
+SKIP_FLOOR = 1.0 / SAFETY
+"""... down to this factor: a discounted estimate is still the measured percentile itself, never
+below it. Skips are mostly calls that the step's earlier calls left no time for, not evidence of a
+pessimistic estimate; compounded without a floor (0.8^6 = 0.26) they let a 135 ms call be predicted
+at 61 ms."""
 CALL_OVERHEAD = 5e-4
 """Time [s] a call costs besides its iterations (CasADi's set-up, copying), before any is measured."""
 IPOPT_OVERRUN = 2e-3
@@ -121,12 +126,13 @@ class CallTimes:
 
     def rung(self, available: float) -> int | None:
         """The largest rung whose call fits in ``available`` seconds (None: none fits; then the
-        estimate is discounted by :data:`SKIP_DISCOUNT` until the next measured call, so that a
-        pessimistic estimate cannot keep every call out for good)."""
+        estimate is discounted by :data:`SKIP_DISCOUNT`, down to :data:`SKIP_FLOOR`, until the next
+        measured call, so that the safety factor of a pessimistic estimate cannot keep every call
+        out for good)."""
         for r in range(len(self.limits)):
             if self.predict(r) <= available:
                 return r
-        self._discount *= SKIP_DISCOUNT
+        self._discount = max(self._discount * SKIP_DISCOUNT, SKIP_FLOOR)
         return None
 
 
