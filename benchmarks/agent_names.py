@@ -6,6 +6,7 @@ The grammar (parts separated by colons; brackets: optional)::
     smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]  RISK: exact (default) or monte_carlo
     ppo:VARIANT                                  a shipped policy: penalty, lagrangian, ...
     idm                                          highway-env's IDM driver (highway commands)
+    hindsight                                    the best wait-then-go schedule in hindsight (highway)
 
 ``SEVERITY`` is one of :data:`risk_env.scenario.SEVERITY_NAMES` and ``TOLERANCE`` the per-step
 bound $\epsilon$ in that severity's own unit (J, probability, injuries); ``budget=B`` gives the SMPC
@@ -30,14 +31,15 @@ RISKS: dict[str, tuple[str, ...]] = {"rmpc": ("worst_case", "grid"), "smpc": ("e
 """The risk estimators of each MPC; the first is the default."""
 PPO_VARIANTS: tuple[str, ...] = ("penalty", "lagrangian", "lagrangian_two_crossing")
 """The shipped PPO policies (``agents/models/ppo_VARIANT.zip``)."""
-KINDS: tuple[str, ...] = ("rmpc", "smpc", "ppo", "idm")
-METHODS = {"rmpc": "RMPC", "smpc": "SMPC", "ppo": "PPO", "idm": "IDM"}
+KINDS: tuple[str, ...] = ("rmpc", "smpc", "ppo", "idm", "hindsight")
+METHODS = {"rmpc": "RMPC", "smpc": "SMPC", "ppo": "PPO", "idm": "IDM", "hindsight": "hindsight"}
 """The class (or driver) each kind of agent is."""
 FORMS = {
     "rmpc": "rmpc[:RISK]",
     "smpc": "smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]",
     "ppo": "ppo:VARIANT",
     "idm": "idm",
+    "hindsight": "hindsight",
 }
 """The form of each kind's names."""
 GRAMMAR = ", ".join(FORMS.values())
@@ -63,9 +65,9 @@ class AgentName:
     """A parsed agent name; ``str()`` gives its full form."""
 
     kind: str
-    """``rmpc``, ``smpc``, ``ppo`` or ``idm``."""
+    """``rmpc``, ``smpc``, ``ppo``, ``idm`` or ``hindsight``."""
     variant: str = ""
-    """The risk estimator (MPCs) or the shipped policy (PPO); empty for ``idm``."""
+    """The risk estimator (MPCs) or the shipped policy (PPO); empty for ``idm`` and ``hindsight``."""
     severity: str | None = None
     """The SMPC's severity (None: the command's)."""
     tolerance: float | None = None
@@ -110,10 +112,10 @@ def parse_agent(
     if kind not in kinds:
         valid = ", ".join(FORMS[k] for k in kinds)
         raise ValueError(f"unknown agent {name!r}: expected {valid}")
-    if kind == "idm":
+    if kind in ("idm", "hindsight"):
         if parts:
-            raise ValueError(f"agent {name!r}: idm takes no parts")
-        return AgentName("idm")
+            raise ValueError(f"agent {name!r}: {kind} takes no parts")
+        return AgentName(kind)
     if kind == "ppo":
         if len(parts) != 1 or parts[0] not in PPO_VARIANTS:
             raise ValueError(

@@ -9,7 +9,10 @@ Names follow :mod:`benchmarks.agent_names`; at the intersection they read:
   alone); ``smpc[:RISK]:budget=B`` the same with budget $B$;
 - ``smpc[:RISK]:SEVERITY:TOLERANCE``: the per-step bound $\epsilon$ alone (no budget), e.g.
   ``smpc:probability:0.01``; ``...:budget=B`` adds a budget to it;
-- ``idm``: :class:`risk_env.highway.IDMEgo`, highway-env's own driver on the ego's route.
+- ``idm``: :class:`risk_env.highway.IDMEgo`, highway-env's own driver on the ego's route;
+- ``hindsight``: :class:`benchmarks.highway_hindsight.HindsightEgo`, the first wait-then-go
+  schedule that reaches the goal unharmed, found by simulating the episode's future (a reference
+  that knows what no planner can, not a planner).
 
 A budget is finite and $\ge 0$ and, in the probability severity, at most 1 (a chance per episode).
 """
@@ -23,8 +26,10 @@ from typing import Any
 
 from benchmarks.agent_names import AgentName, number, parse_agent
 
-KINDS = ("rmpc", "smpc", "idm")
+KINDS = ("rmpc", "smpc", "idm", "hindsight")
 """The kinds of agent the intersection commands run."""
+REFERENCES = ("idm", "hindsight")
+"""The kinds that are reference drivers, not our planners: no predictor, no solver."""
 ADAPTER_CORRIDOR = 1.0
 """The adapter's corridor [m] (:data:`risk_env.highway.adapter.ADAPTER_DEFAULTS`) when the options
 name none."""
@@ -38,7 +43,7 @@ class HighwayAgent:
     """An agent as the intersection commands run it: every part resolved."""
 
     kind: str
-    """``rmpc``, ``smpc`` or ``idm``."""
+    """``rmpc``, ``smpc``, ``idm`` or ``hindsight``."""
     variant: str = ""
     """The risk estimator (``worst_case``, ``exact``, ...); empty for ``idm``."""
     severity: str = ""
@@ -69,6 +74,8 @@ class HighwayAgent:
         0.05, no per-step bound"``."""
         if self.kind == "idm":
             return "highway-env IDM"
+        if self.kind == "hindsight":
+            return "hindsight: the first wait-then-go schedule that arrives unharmed (knows the future)"
         risk = self.variant.replace("_", " ")
         if self.kind == "rmpc":
             return f"RMPC ({risk} risk)"
@@ -137,7 +144,7 @@ class Builder:
 
 
 def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any:
-    """The driver of ``agent`` for ``env``: the IDM, or the MPC through
+    """The driver of ``agent`` for ``env``: the IDM, the hindsight reference, or the MPC through
     :class:`risk_env.highway.IntersectionAdapter` with ``predictor`` and the options of ``args``
     (``uncertainty``, ``slots``, ``max_solve_time``, ``mode_threshold``, ``budget_share``,
     ``lane_pieces``, ``gate``)."""
@@ -146,6 +153,10 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
 
     if agent.kind == "idm":
         return IDMEgo(env)
+    if agent.kind == "hindsight":
+        from benchmarks.highway_hindsight import HindsightEgo
+
+        return HindsightEgo(env)
     options: dict[str, Any] = {"risk": agent.variant, "mode_threshold": args.mode_threshold}
     if args.max_solve_time is not None:
         options["max_solve_time"] = args.max_solve_time

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.highway_agents import built_problems, make_driver, resolve
+from benchmarks.highway_agents import REFERENCES, built_problems, make_driver, resolve
 
 ENV_DEFAULTS: dict[str, float] = {"duration": 13.0, "spawn_probability": 0.6, "initial_vehicle_count": 10}
 """highway-env's own values of the intersection options the commands set (``duration`` [s],
@@ -195,7 +195,7 @@ def run_chunk(job: tuple[str, str, list[int], argparse.Namespace]) -> list[dict[
     out = []
     for seed in seeds:
         row = run_episode(driver, env, seed, args.slots)
-        row.update(agent=name, predictor="" if agent.kind == "idm" else predictor)
+        row.update(agent=name, predictor="" if agent.kind in REFERENCES else predictor)
         if agent.budget is None:
             row["spent_risk"] = ""
         out.append(row)

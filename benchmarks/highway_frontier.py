@@ -32,8 +32,8 @@ AGENTS = "rmpc,smpc:budget=0.01,smpc:budget=0.02,smpc:budget=0.05,smpc:budget=0.
 """The frontier's agents by default."""
 FILES = ("frontier.png", "frontier.md", "frontier.csv", "frontier_episodes.csv")
 """The files a run writes in ``--out``."""
-COLOURS = {"rmpc": "tab:blue", "smpc": "tab:orange", "idm": "black"}
-MARKERS = {"rmpc": "^", "smpc": "o", "idm": "*"}
+COLOURS = {"rmpc": "tab:blue", "smpc": "tab:orange", "idm": "black", "hindsight": "tab:gray"}
+MARKERS = {"rmpc": "^", "smpc": "o", "idm": "*", "hindsight": "P"}
 PREDICTOR_NAMES = {"constant": "the paper's"}
 """How the legend names a predictor (others by their own name)."""
 PREDICTOR_STYLE = {"lane": "-", "constant": "--"}
@@ -76,6 +76,8 @@ def _style(s: dict[str, Any]) -> tuple[str, str, float | None]:
     note = f" ({PREDICTOR_NAMES.get(pred, pred)} predictor)" if pred else ""
     if agent.kind == "idm":
         return "IDM (highway-env)", "*", None
+    if agent.kind == "hindsight":
+        return "hindsight (knows the future)", "P", None
     if agent.kind == "rmpc":
         return f"RMPC{note}", "^", None
     if agent.budget is not None and agent.tolerance is None:
@@ -114,7 +116,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             x,
             y,
             marker=marker,
-            ms=13 if kind == "idm" else 8,
+            ms=13 if kind in ("idm", "hindsight") else 8,
             ls="none",
             color=colour,
             fillstyle=PREDICTOR_FILL.get(s["predictor"], "left") if s["predictor"] else "full",

@@ -26,6 +26,8 @@ in every command, :mod:`benchmarks.agent_names`; at the intersection as
   per-step bound; ``smpc:budget=0.02`` another budget; ``smpc:probability:0.01`` the per-step
   bound alone (a collision chance of at most 1 % per step under the prediction);
 - ``idm``: :class:`IDMEgo`, highway-env's ``IDMVehicle`` on the same route (its reference driver).
+- ``hindsight``: :class:`~benchmarks.highway_hindsight.HindsightEgo`, the first wait-then-go
+  schedule that arrives unharmed, found in the episode's own future (an upper reference).
 
 The MPCs plan with each predictor of ``--predictor`` (``lane``: the routes along highway-env's
 lanes; ``constant``: the paper's; ``lane,constant`` runs each MPC with both, on the same seeds),
@@ -49,7 +51,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import cli
-from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, check_budget, resolve
+from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, REFERENCES, check_budget, resolve
 from benchmarks.highway_episodes import ENV_DEFAULTS, crash_kind, run_chunk
 from benchmarks.highway_tables import markdown, summarise, write_csvs
 from benchmarks.sweep import run_sweep
@@ -89,7 +91,7 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         "--agents",
         type=cli.agents_list(KINDS),
         default=agents,
-        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B], idm",
+        help="comma list of rmpc[:RISK], smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B], idm, hindsight",
     )
     parser.add_argument(
         "--predictor",
@@ -218,7 +220,7 @@ def check_duration(parser: argparse.ArgumentParser, duration: float, flag: str) 
 def plan_runs(agents: list[str], predictors: list[str]) -> list[tuple[str, str]]:
     """The runs ``(agent, predictor)`` of a command: each MPC with each predictor, in the order
     given, the IDM once (predictor ``""``)."""
-    return [(name, p) for name in agents for p in (predictors if name != "idm" else [""])]
+    return [(name, p) for name in agents for p in (predictors if name not in REFERENCES else [""])]
 
 
 def run(args: argparse.Namespace, out: Any) -> tuple[list[dict[str, Any]], list[dict[str, Any]], float]:

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.highway_agents import resolve
+from benchmarks.highway_agents import REFERENCES, resolve
 from benchmarks.sampled_rows import wilson
 
 RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road")
@@ -151,7 +151,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
             f" {_ci(s, 'vehicle_into_ego')} | {_ci(s, 'goal')} | {100 * s['timeout_rate']:.1f}% |"
             f" {s['deadlock']} | {s['off_road']} | {_f(s['time_to_goal_s'])} |"
         )
-    mpcs = [s for s in summary if s["agent"] != "idm"]
+    mpcs = [s for s in summary if s["agent"] not in REFERENCES]
     if not mpcs:
         return "\n".join(lines) + "\n"
     lines += [

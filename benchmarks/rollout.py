@@ -235,8 +235,10 @@ def main(argv: list[str] | None = None) -> EpisodeRecord:
     args = p.parse_args(argv)
     try:
         agent = parse_agent(args.agent).with_defaults(args.severity, args.tolerance)
-        if agent.kind == "idm":
-            raise ValueError("idm drives in highway-env only (python -m benchmarks.highway_intersection)")
+        if agent.kind in ("idm", "hindsight"):
+            raise ValueError(
+                f"{agent.kind} drives in highway-env only (python -m benchmarks.highway_intersection)"
+            )
         from risk_env.risk.severity import check_tolerance
 
         check_tolerance(args.tolerance, args.severity, "--tolerance")

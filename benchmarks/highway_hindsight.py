@@ -1,0 +1,141 @@
+r"""A reference with hindsight for the intersection: the best wait-then-go schedule, found by
+simulating the episode's own future.
+
+:class:`HindsightEgo` is no planner: at the episode's start it copies the simulator (the traffic's
+random draws included, so each copy lives the same future) and tries the schedules "wait at the
+stop line until $t_0$, then go", $t_0 = 0, T, 2T, \dots$ up to the episode's end, each on its own
+copy; the ego of the first schedule that reaches the goal without a collision then drives the real
+episode, which repeats that copy's future exactly. Where none does, the ego waits at the line for
+the whole episode.
+
+The ego is highway-env's ``IDMVehicle`` on the route (the traffic's own driver: its speed, its
+following, its acceleration of up to 6 m/s^2 at the intersection), with two changes: it never
+yields (the schedule decides when it goes), and while it waits it follows a virtual stopped car
+whose rear is at the junction's entry, so it stops with its front there.
+
+What it tells: how often a collision-free passage within the episode exists at all for a driver
+that waits and then goes, against which the planners' goal rates can be read. It knows what no
+planner can (the traffic's future, which depends on the random route and behaviour each vehicle
+draws), so its rates bound from above what a planner of this kind could reach, on the same seeds.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+import numpy as np
+
+from risk_env.highway.common import unwrapped_highway
+from risk_env.highway.idm import reached
+
+JUNCTION_PREFIX = "ir"
+"""A route lane to a node named so ends at highway-env's intersection entry (``o* -> ir*``)."""
+
+
+def scheduled_vehicle(base: Any, go_at: float) -> Any:
+    """A copy of ``base``'s controlled vehicle as the schedule's driver, waiting at the stop line for
+    ``go_at`` simulation frames from now (inf: throughout; see the module)."""
+    from highway_env.vehicle.behavior import IDMVehicle
+    from highway_env.vehicle.kinematics import Vehicle
+
+    class Scheduled(IDMVehicle):
+        """highway-env's IDM on the route that never yields and waits for :attr:`go_at` frames of
+        its own clock (frames since it was placed)."""
+
+        def act(self, action: Any = None) -> None:
+            self.target_speed = self.lane.speed_limit  # never yields: the schedule decides
+            super().act(action)
+
+        def step(self, dt: float) -> None:
+            self.clock += 1  # once per simulation frame (act() also runs on the policy's frames)
+            super().step(dt)
+
+        def acceleration(
+            self, ego_vehicle: Any, front_vehicle: Any = None, rear_vehicle: Any = None
+        ) -> float:
+            a = super().acceleration(ego_vehicle, front_vehicle, rear_vehicle)
+            waiting = ego_vehicle is self and self.clock < self.go_at
+            if waiting and self.lane_index[1].startswith(JUNCTION_PREFIX):
+                lane = self.road.network.get_lane(self.lane_index)
+                s = lane.length - self.LENGTH / 2 + self.DISTANCE_WANTED  # IDM stops d0 behind it
+                line = Vehicle(self.road, lane.position(s, 0.0), lane.heading_at(lane.length), 0.0)
+                a = min(a, super().acceleration(self, line, None))
+            return float(a)
+
+    old = base.vehicle
+    ego = Scheduled(base.road, old.position.copy(), heading=old.heading, speed=old.speed)
+    ego.plan_route_to(base.config["destination"])
+    ego.go_at, ego.clock = go_at, 0
+    return ego
+
+
+def put_ego(base: Any, ego: Any) -> None:
+    """Make ``ego`` the controlled vehicle of ``base`` in place of the current one."""
+    old = base.vehicle
+    base.road.vehicles[base.road.vehicles.index(old)] = ego
+    base.controlled_vehicles[base.controlled_vehicles.index(old)] = ego
+
+
+def outcome(sim: Any, destination: str) -> tuple[bool, bool]:
+    """Run ``sim`` (an unwrapped copy) to its episode's end: ``(collision, goal)``."""
+    action = np.zeros(sim.action_space.shape, dtype=np.float32)
+    done = False
+    while not done:
+        _, _, terminated, truncated, _ = sim.step(action)
+        done = terminated or truncated
+    return bool(sim.vehicle.crashed), bool(reached(sim, destination))
+
+
+class HindsightEgo:
+    """The reference with hindsight (see the module); drives ``env``'s controlled vehicle itself,
+    whatever action is passed (``predict`` returns a zero action), like
+    :class:`risk_env.highway.IDMEgo`. ``reset()`` after each ``env.reset`` searches the schedules
+    (:attr:`start`: the chosen $t_0$ [s], inf: waits throughout; :attr:`tried`: schedules simulated)."""
+
+    def __init__(self, env: Any, destination: str | None = None) -> None:
+        self.env = env
+        base = unwrapped_highway(env)
+        self.destination = destination or base.config.get("destination")
+        if not self.destination:
+            raise ValueError("no destination: pass destination= or set the env's config['destination']")
+        self.start = math.inf
+        self.tried = 0
+        self.last_solve = None
+        self._vehicle: Any = None
+
+    def reset(self) -> None:
+        """Search the schedules on copies of the episode just reset, and drive the first that
+        reaches the goal without a collision (else wait)."""
+        base = unwrapped_highway(self.env)
+        base.config["destination"] = self.destination
+        period = 1.0 / base.config["policy_frequency"]
+        frames = int(base.config["simulation_frequency"] // base.config["policy_frequency"])
+        self.start, self.tried = math.inf, 0
+        # one copy waits throughout; at each step a copy of it goes, until one arrives unharmed
+        waiting = copy.deepcopy(base)
+        put_ego(waiting, scheduled_vehicle(waiting, math.inf))
+        idle = np.zeros(waiting.action_space.shape, dtype=np.float32)
+        for step in range(math.ceil(base.config["duration"] / period)):
+            branch = copy.deepcopy(waiting)
+            branch.vehicle.go_at = branch.vehicle.clock
+            self.tried += 1
+            crashed, goal = outcome(branch, self.destination)
+            if goal and not crashed:
+                self.start = step * period
+                break
+            _, _, terminated, truncated, _ = waiting.step(idle)
+            if terminated or truncated:
+                break
+        go_at = math.inf if math.isinf(self.start) else round(self.start / period) * frames
+        self._vehicle = scheduled_vehicle(base, go_at)
+        put_ego(base, self._vehicle)
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[np.ndarray, None]:
+        base = unwrapped_highway(self.env)
+        if base.vehicle is not self._vehicle:
+            self.reset()
+        return np.zeros(self.env.action_space.shape, dtype=np.float32), None
