@@ -35,6 +35,7 @@ from benchmarks.agent_names import AgentName, parse_agent, parse_agents
         ("smpc:injury:0.001:budget=0.01", "smpc:exact:injury:0.001:budget=0.01"),
         ("ppo:lagrangian", "ppo:lagrangian"),
         ("idm", "idm"),
+        ("hindsight", "hindsight"),
     ],
 )
 def test_every_agent_reads_back_from_its_full_name(text, full):
@@ -54,6 +55,7 @@ def test_every_agent_reads_back_from_its_full_name(text, full):
         ("rmpc:budget=1", "the RMPC has no risk budget"),
         ("ppo", "expected ppo:VARIANT"),
         ("idm:x", "idm takes no parts"),
+        ("hindsight:5", "hindsight takes no parts"),
         ("smpc0", "'smpc0' is spelled 'smpc:paper:0' now"),
         ("smpc_exact", "'smpc_exact' is spelled 'smpc:exact' now"),
     ],

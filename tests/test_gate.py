@@ -1,5 +1,5 @@
-"""The junction gate (risk_env.highway.gate): it closes when a vehicle's predicted bound reaches the
-junction's conflict zone before the ego can clear it, opens otherwise, never after the ego
+"""The junction gate (risk_env.highway.gate): it closes when a vehicle's predicted bound occupies a
+point of the junction's conflict zone while the ego would be there, opens otherwise, never after the ego
 commits; its virtual object is neither scored (RiskCostWrapper) nor charged to an SMPC's budget."""
 
 from __future__ import annotations
@@ -90,9 +90,10 @@ def test_travel_time_accelerates_to_the_cap():
     assert travel_time(np.array([d_acc + 16.0]), 0.0, 3.0, 8.0)[0] == pytest.approx(8.0 / 3.0 + 2.0)
 
 
-def test_the_gate_closes_for_a_vehicle_that_reaches_the_zone_first():
+def test_the_gate_closes_for_a_vehicle_that_reaches_the_zone_while_the_ego_is_in_it():
     g = gate()
-    decision = g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))  # at the zone in ~1.6 s
+    # at the route's x = 60 from 2.6 to 3.4 s; the ego (from 30 m at 5 m/s) there from 3.0 to 3.4 s
+    decision = g.decide(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
     assert decision.closed and not decision.committed and decision.slack < 0.0
     virtual = g.virtual()
     # on the route, the ego's front stopping LINE_BUFFER before the line: centre + half length = 48.5
@@ -114,6 +115,19 @@ def test_the_gate_opens_when_nobody_comes_in_time():
     assert not gate().decide(-20.0, 5.0, crossing_at(60.0, -20.0, 10.0)).closed
 
 
+def test_a_vehicle_that_has_left_a_point_before_the_ego_comes_is_no_conflict():
+    """Judged by occupancy, not by arrival: the gate once closed for every vehicle that reached a
+    point of the zone before the ego had cleared it, also one that had left it long before the ego
+    came (a leader on the ego's own route, a car crossing now)."""
+    assert not gate().decide(20.0, 5.0, crossing_at(60.0, -3.0, 10.0)).closed  # gone in under 1 s
+    leader = np.array([[55.0, 0.0, 0.0, 8.0, 0.0]])  # ahead on the route, driving on
+    assert not gate().decide(20.0, 5.0, leader).closed
+    stopped = np.array([[60.0, 0.0, 0.0, 0.0, 0.0]])  # stands in the zone: still there when the ego comes
+    assert gate().decide(20.0, 5.0, stopped).closed
+    # its box growing behind it too (it may be slower): the point may still be occupied
+    assert gate(Crossing(growth=30.0)).decide(20.0, 5.0, crossing_at(60.0, -3.0, 10.0)).closed
+
+
 def test_the_gate_never_closes_after_the_ego_commits():
     g = gate()
     assert not g.decide(45.0, 8.0, crossing_at(60.0, -200.0, 10.0)).closed
@@ -123,15 +137,15 @@ def test_the_gate_never_closes_after_the_ego_commits():
     assert not g.decide(47.0, 2.0, crossing_at(60.0, -5.0, 10.0)).closed
     # a gate that closed while the ego could stop stays closed when it can no longer (no commit)
     h = gate()
-    assert h.decide(30.0, 8.0, crossing_at(60.0, -20.0, 10.0)).closed
+    assert h.decide(30.0, 8.0, crossing_at(60.0, -25.0, 10.0)).closed
     late = h.decide(45.0, 8.0, crossing_at(60.0, -15.0, 10.0))
     assert late.closed and not late.committed
     # an ego stopped past the line is held: the virtual object just ahead of its disc, staying there
-    assert h.decide(49.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed
+    assert h.decide(49.0, 0.0, crossing_at(60.0, -25.0, 10.0)).closed
     held = h.virtual()[0]
     assert held == pytest.approx(49.0 + 4.0 + VIRTUAL_HALF + HOLD_GAP)
-    assert h.decide(49.0, 0.0, crossing_at(60.0, -10.0, 10.0)).closed and h.virtual()[0] == held
-    late = h.decide(52.0, 0.0, crossing_at(60.0, -10.0, 10.0))
+    assert h.decide(49.0, 0.0, crossing_at(60.0, -25.0, 10.0)).closed and h.virtual()[0] == held
+    late = h.decide(52.0, 0.0, crossing_at(60.0, -25.0, 10.0))
     assert late.closed and not late.committed and h.virtual()[0] > 52.0 + 4.0
 
 
@@ -187,14 +201,14 @@ def test_the_virtual_objects_risk_is_given_back_to_the_budget():
             self._spent[index] -= risk
 
     g, agent = gate(), Budgeted()
-    g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))
+    assert g.decide(30.0, 5.0, crossing_at(60.0, -30.0, 10.0)).closed
     assert g.refund(agent, Report()) == pytest.approx(0.7)
     assert agent._spent[0] == pytest.approx(0.7) and g.refunded == pytest.approx(0.7)
     g.decide(30.0, 5.0, crossing_at(60.0, -300.0, 10.0))  # open: nothing virtual to give back
     assert g.refund(agent, Report()) == 0.0 and agent._spent[0] == pytest.approx(0.7)
     no_budget = Budgeted()
     no_budget.risk_budget = None
-    g.decide(30.0, 5.0, crossing_at(60.0, -20.0, 10.0))
+    assert g.decide(30.0, 5.0, crossing_at(60.0, -30.0, 10.0)).closed
     assert g.refund(no_budget, Report()) == 0.0
 
 

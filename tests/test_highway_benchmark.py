@@ -75,9 +75,10 @@ def test_what_each_agent_name_means_at_the_intersection():
 
 def test_each_mpc_runs_with_each_predictor_the_idm_once():
     runs = highway_intersection.plan_runs(
-        ["rmpc:worst_case", "idm", "smpc:exact:budget=0.05"], ["lane", "constant"]
+        ["rmpc:worst_case", "idm", "smpc:exact:budget=0.05", "hindsight"], ["lane", "constant"]
     )
-    assert runs == [
+    assert runs[-1] == ("hindsight", "")  # a reference driver: no predictor
+    assert runs[:-1] == [
         ("rmpc:worst_case", "lane"),
         ("rmpc:worst_case", "constant"),
         ("idm", ""),
