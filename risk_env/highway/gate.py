@@ -20,11 +20,9 @@ junction, each step, whether the ego can cross all of it first:
   :data:`GATE_STEPS` steps), linearly between steps; still there at the horizon's end: for ever.
 - The gate **closes** when some vehicle occupies some point while the ego would be there, with
   :data:`GATE_MARGIN` to spare on either side: $\max(t^o_{in,j} - t^e_{out,j}, t^e_{in,j} -
-  t^o_{out,j}) <$ margin. (Judged by arrival alone, $t^o_{in,j} < t^e_{out,j}$ + margin, it closed
-  for every vehicle that had passed a point long before the ego would come, a leader on the ego's own
-  route included: in the committed frontier run on the interval prediction it stayed closed at 25
-  or 26 of 26 steps in 9 of 10 episodes, for every planner.) Then the MPC is handed a **virtual
-  stationary object** at the stop line (:meth:`JunctionGate.virtual`), in one of its object slots,
+  t^o_{out,j}) <$ margin. (Judged by arrival alone, $t^o_{in,j} < t^e_{out,j}$ + margin, it also
+  closed for a vehicle that had passed a point long before the ego would come, a leader on the
+  ego's own route included.) Then the MPC is handed a **virtual stationary object** at the stop line (:meth:`JunctionGate.virtual`), in one of its object slots,
   which its risk rows keep it off like any vehicle (no change to the problem).
 - The ego **commits** once, the gate open, it cannot stop its front before the junction at
   ``accel`` ($v^2 / 2a$ beyond the distance left), or once its front is past the line: from then on
