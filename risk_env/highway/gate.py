@@ -22,8 +22,9 @@ junction, each step, whether the ego can cross all of it first:
   :data:`GATE_MARGIN` to spare on either side: $\max(t^o_{in,j} - t^e_{out,j}, t^e_{in,j} -
   t^o_{out,j}) <$ margin. (Judged by arrival alone, $t^o_{in,j} < t^e_{out,j}$ + margin, it also
   closed for a vehicle that had passed a point long before the ego would come, a leader on the
-  ego's own route included.) Then the MPC is handed a **virtual stationary object** at the stop line (:meth:`JunctionGate.virtual`), in one of its object slots,
-  which its risk rows keep it off like any vehicle (no change to the problem).
+  ego's own route included.) Then the MPC is handed a **virtual stationary object** at the stop
+  line (:meth:`JunctionGate.virtual`), in one of its object slots, which its risk rows keep it off
+  like any vehicle (no change to the problem).
 - The ego **commits** once, the gate open, it cannot stop its front before the junction at
   ``accel`` ($v^2 / 2a$ beyond the distance left), or once its front is past the line: from then on
   the gate stays open this episode. A gate that closes when the ego can no longer stop before the
