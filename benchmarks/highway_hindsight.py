@@ -34,9 +34,9 @@ JUNCTION_PREFIX = "ir"
 """A route lane to a node named so ends at highway-env's intersection entry (``o* -> ir*``)."""
 
 
-def scheduled_vehicle(base: Any, go_at: float) -> Any:
-    """A copy of ``base``'s controlled vehicle as the schedule's driver, waiting at the stop line for
-    ``go_at`` simulation frames from now (inf: throughout; see the module)."""
+def scheduled_vehicle(base: Any, go_at: float, destination: str) -> Any:
+    """A copy of ``base``'s controlled vehicle as the schedule's driver to ``destination``, waiting at
+    the stop line for ``go_at`` simulation frames from now (inf: throughout; see the module)."""
     from highway_env.vehicle.behavior import IDMVehicle
     from highway_env.vehicle.kinematics import Vehicle
 
@@ -66,7 +66,7 @@ def scheduled_vehicle(base: Any, go_at: float) -> Any:
 
     old = base.vehicle
     ego = Scheduled(base.road, old.position.copy(), heading=old.heading, speed=old.speed)
-    ego.plan_route_to(base.config["destination"])
+    ego.plan_route_to(destination)
     ego.go_at, ego.clock = go_at, 0
     return ego
 
@@ -109,13 +109,12 @@ class HindsightEgo:
         """Search the schedules on copies of the episode just reset, and drive the first that
         reaches the goal without a collision (else wait)."""
         base = unwrapped_highway(self.env)
-        base.config["destination"] = self.destination
         period = 1.0 / base.config["policy_frequency"]
         frames = int(base.config["simulation_frequency"] // base.config["policy_frequency"])
         self.start, self.tried = math.inf, 0
         # one copy waits throughout; at each step a copy of it goes, until one arrives unharmed
         waiting = copy.deepcopy(base)
-        put_ego(waiting, scheduled_vehicle(waiting, math.inf))
+        put_ego(waiting, scheduled_vehicle(waiting, math.inf, self.destination))
         idle = np.zeros(waiting.action_space.shape, dtype=np.float32)
         for step in range(math.ceil(base.config["duration"] / period)):
             branch = copy.deepcopy(waiting)
@@ -129,7 +128,7 @@ class HindsightEgo:
             if terminated or truncated:
                 break
         go_at = math.inf if math.isinf(self.start) else round(self.start / period) * frames
-        self._vehicle = scheduled_vehicle(base, go_at)
+        self._vehicle = scheduled_vehicle(base, go_at, self.destination)
         put_ego(base, self._vehicle)
 
     def predict(
