@@ -34,6 +34,9 @@ PPO_VARIANTS: tuple[str, ...] = ("penalty", "lagrangian", "lagrangian_two_crossi
 KINDS: tuple[str, ...] = ("rmpc", "smpc", "ppo", "idm", "hindsight")
 METHODS = {"rmpc": "RMPC", "smpc": "SMPC", "ppo": "PPO", "idm": "IDM", "hindsight": "hindsight"}
 """The class (or driver) each kind of agent is."""
+REFERENCES: tuple[str, ...] = ("idm", "hindsight")
+"""The kinds that are reference drivers, not our planners: no parts, no predictor, no solver; they
+drive highway-env's vehicle themselves (highway commands only)."""
 FORMS = {
     "rmpc": "rmpc[:RISK]",
     "smpc": "smpc[:RISK][:SEVERITY:TOLERANCE][:budget=B]",
@@ -112,7 +115,7 @@ def parse_agent(
     if kind not in kinds:
         valid = ", ".join(FORMS[k] for k in kinds)
         raise ValueError(f"unknown agent {name!r}: expected {valid}")
-    if kind in ("idm", "hindsight"):
+    if kind in REFERENCES:
         if parts:
             raise ValueError(f"agent {name!r}: {kind} takes no parts")
         return AgentName(kind)

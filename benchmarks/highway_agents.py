@@ -28,8 +28,6 @@ from benchmarks.agent_names import AgentName, number, parse_agent
 
 KINDS = ("rmpc", "smpc", "idm", "hindsight")
 """The kinds of agent the intersection commands run."""
-REFERENCES = ("idm", "hindsight")
-"""The kinds that are reference drivers, not our planners: no predictor, no solver."""
 ADAPTER_CORRIDOR = 1.0
 """The adapter's corridor [m] (:data:`risk_env.highway.adapter.ADAPTER_DEFAULTS`) when the options
 name none."""

@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.highway_agents import REFERENCES, built_problems, make_driver, resolve
+from benchmarks.agent_names import REFERENCES
+from benchmarks.highway_agents import built_problems, make_driver, resolve
 
 ENV_DEFAULTS: dict[str, float] = {"duration": 13.0, "spawn_probability": 0.6, "initial_vehicle_count": 10}
 """highway-env's own values of the intersection options the commands set (``duration`` [s],

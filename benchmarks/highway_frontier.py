@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import cli, highway_intersection
-from benchmarks.agent_names import parse_agent
+from benchmarks.agent_names import REFERENCES, parse_agent
 from benchmarks.highway_agents import KINDS
 from benchmarks.highway_intersection import add_options, run
 from benchmarks.highway_tables import markdown, write_csvs
@@ -116,7 +116,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             x,
             y,
             marker=marker,
-            ms=13 if kind in ("idm", "hindsight") else 8,
+            ms=13 if kind in REFERENCES else 8,
             ls="none",
             color=colour,
             fillstyle=PREDICTOR_FILL.get(s["predictor"], "left") if s["predictor"] else "full",

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from risk_env.highway.common import unwrapped_highway
-from risk_env.highway.idm import reached
+from risk_env.highway.idm import IDMEgo, put_ego, reached
 
 JUNCTION_PREFIX = "ir"
 """A route lane to a node named so ends at highway-env's intersection entry (``o* -> ir*``)."""
@@ -71,13 +71,6 @@ def scheduled_vehicle(base: Any, go_at: float, destination: str) -> Any:
     return ego
 
 
-def put_ego(base: Any, ego: Any) -> None:
-    """Make ``ego`` the controlled vehicle of ``base`` in place of the current one."""
-    old = base.vehicle
-    base.road.vehicles[base.road.vehicles.index(old)] = ego
-    base.controlled_vehicles[base.controlled_vehicles.index(old)] = ego
-
-
 def outcome(sim: Any, destination: str) -> tuple[bool, bool]:
     """Run ``sim`` (an unwrapped copy) to its episode's end: ``(collision, goal)``."""
     action = np.zeros(sim.action_space.shape, dtype=np.float32)
@@ -88,27 +81,23 @@ def outcome(sim: Any, destination: str) -> tuple[bool, bool]:
     return bool(sim.vehicle.crashed), bool(reached(sim, destination))
 
 
-class HindsightEgo:
-    """The reference with hindsight (see the module); drives ``env``'s controlled vehicle itself,
-    whatever action is passed (``predict`` returns a zero action), like
-    :class:`risk_env.highway.IDMEgo`. ``reset()`` after each ``env.reset`` searches the schedules
-    (:attr:`start`: the chosen $t_0$ [s], inf: waits throughout; :attr:`tried`: schedules simulated)."""
+class HindsightEgo(IDMEgo):
+    """The reference with hindsight (see the module); like :class:`risk_env.highway.IDMEgo` it drives
+    ``env``'s controlled vehicle itself, whatever action is passed (``predict`` returns a zero
+    action). ``reset()`` after each ``env.reset`` searches the schedules (:attr:`start`: the chosen
+    $t_0$ [s], inf: waits throughout; :attr:`tried`: schedules simulated)."""
 
     def __init__(self, env: Any, destination: str | None = None) -> None:
-        self.env = env
-        base = unwrapped_highway(env)
-        self.destination = destination or base.config.get("destination")
-        if not self.destination:
-            raise ValueError("no destination: pass destination= or set the env's config['destination']")
+        super().__init__(env, destination)
         self.start = math.inf
         self.tried = 0
-        self.last_solve = None
-        self._vehicle: Any = None
 
     def reset(self) -> None:
         """Search the schedules on copies of the episode just reset, and drive the first that
         reaches the goal without a collision (else wait)."""
-        base = unwrapped_highway(self.env)
+        self._take_over(unwrapped_highway(self.env))
+
+    def _take_over(self, base: Any) -> None:
         period = 1.0 / base.config["policy_frequency"]
         frames = int(base.config["simulation_frequency"] // base.config["policy_frequency"])
         self.start, self.tried = math.inf, 0
@@ -130,11 +119,3 @@ class HindsightEgo:
         go_at = math.inf if math.isinf(self.start) else round(self.start / period) * frames
         self._vehicle = scheduled_vehicle(base, go_at, self.destination)
         put_ego(base, self._vehicle)
-
-    def predict(
-        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
-    ) -> tuple[np.ndarray, None]:
-        base = unwrapped_highway(self.env)
-        if base.vehicle is not self._vehicle:
-            self.reset()
-        return np.zeros(self.env.action_space.shape, dtype=np.float32), None

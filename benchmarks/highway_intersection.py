@@ -51,7 +51,8 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import cli
-from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, REFERENCES, check_budget, resolve
+from benchmarks.agent_names import REFERENCES
+from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, check_budget, resolve
 from benchmarks.highway_episodes import ENV_DEFAULTS, crash_kind, run_chunk
 from benchmarks.highway_tables import markdown, summarise, write_csvs
 from benchmarks.sweep import run_sweep

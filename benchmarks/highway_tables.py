@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.highway_agents import REFERENCES, resolve
+from benchmarks.agent_names import REFERENCES
+from benchmarks.highway_agents import resolve
 from benchmarks.sampled_rows import wilson
 
 RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road")

@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from benchmarks import cli
-from benchmarks.agent_names import PPO_VARIANTS, RISKS, AgentName, parse_agent
+from benchmarks.agent_names import PPO_VARIANTS, REFERENCES, RISKS, AgentName, parse_agent
 
 AGENTS: dict[str, tuple[str, str]] = {
     f"{kind}:{variant}": (kind.upper(), variant) for kind, variants in RISKS.items() for variant in variants
@@ -235,7 +235,7 @@ def main(argv: list[str] | None = None) -> EpisodeRecord:
     args = p.parse_args(argv)
     try:
         agent = parse_agent(args.agent).with_defaults(args.severity, args.tolerance)
-        if agent.kind in ("idm", "hindsight"):
+        if agent.kind in REFERENCES:
             raise ValueError(
                 f"{agent.kind} drives in highway-env only (python -m benchmarks.highway_intersection)"
             )

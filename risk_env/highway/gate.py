@@ -53,9 +53,11 @@ from risk_env import checks
 from risk_env.highway.common import unwrapped_highway
 from risk_env.highway.lane_agents import lane_scenario
 from risk_env.highway.route import RoutePath
+from risk_env.models.frame import to_frame
 from risk_env.prediction.belief import Belief
 from risk_env.prediction.mixture import Mixture
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
+from risk_env.risk.disc import signed_box_distance
 from risk_env.scenario.scenario import Scenario
 
 JUNCTION_PREFIX = "ir"
@@ -137,11 +139,8 @@ def occupancy(
         x, y = np.interp(tau, grid, b[:, 0]), np.interp(tau, grid, b[:, 1])
         hx, hy = np.interp(tau, grid, b[:, 7]), np.interp(tau, grid, b[:, 8])
         frame = np.interp(tau, grid, np.unwrap(b[:, 11]))
-        dx, dy = points[None, :, 0] - x[:, None], points[None, :, 1] - y[:, None]
-        c, s = np.cos(frame)[:, None], np.sin(frame)[:, None]
-        along = np.maximum(np.abs(c * dx + s * dy) - hx[:, None], 0.0)
-        across = np.maximum(np.abs(-s * dx + c * dy) - hy[:, None], 0.0)
-        near = np.hypot(along, across) < reach  # (T, J)
+        dx, dy = to_frame(points[None, :, 0] - x[:, None], points[None, :, 1] - y[:, None], frame[:, None])
+        near = signed_box_distance(dx, dy, hx[:, None], hy[:, None]) < reach  # (T, J)
         seen = near.any(axis=0)
         first = np.minimum(first, np.where(seen, tau[np.argmax(near, axis=0)], math.inf))
         ends = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])

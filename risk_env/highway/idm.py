@@ -43,9 +43,16 @@ class IDMEgo:
         cls = utils.class_from_path(base.config["other_vehicles_type"])
         idm = cls(base.road, old.position.copy(), heading=old.heading, speed=old.speed)
         idm.plan_route_to(self.destination)
-        base.road.vehicles[base.road.vehicles.index(old)] = idm
-        base.controlled_vehicles[base.controlled_vehicles.index(old)] = idm
+        put_ego(base, idm)
         self._vehicle = idm
+
+
+def put_ego(base: Any, vehicle: Any) -> None:
+    """Make ``vehicle`` the controlled vehicle of the unwrapped highway-env ``base`` in place of the
+    current one (on the road and among the controlled vehicles)."""
+    old = base.vehicle
+    base.road.vehicles[base.road.vehicles.index(old)] = vehicle
+    base.controlled_vehicles[base.controlled_vehicles.index(old)] = vehicle
 
 
 def reached(env: gym.Env, destination: str) -> bool:
