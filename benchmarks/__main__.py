@@ -14,6 +14,7 @@ COMMANDS: dict[str, str] = {
     "highway_intersection": "our agents drive highway-env's intersection against its IDM",
     "prediction": "how well the paper's and the lane predictor predict highway-env's intersection traffic",
     "highway_frontier": "the intersection's frontier: goal rate against collision rate, the IDM beside",
+    "highway_gate": "the junction gate's verdicts against what going at once would have done",
     "highway_render": "pictures through highway-env's graphics: the paper's episode, an intersection",
     "train_ppo": "train the PPO baseline (stable-baselines3) with a risk cost",
     "ppo_study": "short PPO runs behind the reward weights and the prediction features",

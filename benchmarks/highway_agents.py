@@ -19,11 +19,13 @@ A budget is finite and $\ge 0$ and, in the probability severity, at most 1 (a ch
 
 from __future__ import annotations
 
+import argparse
 import functools
 import math
 from dataclasses import dataclass
 from typing import Any
 
+from benchmarks import cli
 from benchmarks.agent_names import AgentName, number, parse_agent
 
 KINDS = ("rmpc", "smpc", "idm", "hindsight")
@@ -145,7 +147,7 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
     """The driver of ``agent`` for ``env``: the IDM, the hindsight reference, or the MPC through
     :class:`risk_env.highway.IntersectionAdapter` with ``predictor`` and the options of ``args``
     (``uncertainty``, ``slots``, ``max_solve_time``, ``mode_threshold``, ``budget_share``,
-    ``lane_pieces``, ``gate``)."""
+    ``lane_pieces``, ``interval``, ``gate``)."""
     from agents import RMPC, SMPC
     from risk_env.highway import IDMEgo, IntersectionAdapter
 
@@ -163,10 +165,12 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         if agent.budget is not None:
             options |= {"risk_budget": agent.budget, "budget_share": args.budget_share}
     pieces = getattr(args, "lane_pieces", 1)
-    if predictor in ("lane", "lane+interval") and pieces > 1:
+    switches = tuple(getattr(args, "interval", ()))
+    if predictor in ("lane", "lane+interval") and (pieces > 1 or (switches and predictor == "lane+interval")):
         from risk_env.highway.predictors import highway_predictor
 
-        predictor = highway_predictor(predictor, env, pieces=pieces)
+        intervals = interval_model(switches) if predictor == "lane+interval" else None
+        predictor = highway_predictor(predictor, env, pieces=pieces, intervals=intervals)
     return IntersectionAdapter(
         env,
         Builder(functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options)),
@@ -177,3 +181,40 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
         gate=getattr(args, "gate", True),
     )
+
+
+INTERVAL_SWITCHES = ("split_yield", "centred")
+"""The interval prediction's switches a benchmark's ``--interval`` may turn on
+(:class:`~risk_env.highway.lanes.interval.IntervalModel`'s bool fields of these names)."""
+
+
+def interval_switches(text: str) -> tuple[str, ...]:
+    """``type=`` of ``--interval``: a comma list of :data:`INTERVAL_SWITCHES` to turn on ("" for none)."""
+    items = [item for item in cli._items(text) if item] if text.strip() else []
+    bad = [item for item in items if item not in INTERVAL_SWITCHES]
+    if bad:
+        names = ", ".join(repr(b) for b in bad)
+        raise argparse.ArgumentTypeError(
+            f"unknown interval switch {names}; expected from {', '.join(INTERVAL_SWITCHES)}"
+        )
+    return tuple(dict.fromkeys(items))
+
+
+def add_interval_option(parser: argparse.ArgumentParser) -> None:
+    """``--interval``: switches of the ``lane+interval`` predictor's
+    :class:`~risk_env.highway.lanes.interval.IntervalModel` to turn on."""
+    parser.add_argument(
+        "--interval",
+        type=interval_switches,
+        default=(),
+        help="comma list of the lane+interval predictor's switches to turn on: split_yield (each mode"
+        " held or free, weighted by the yielding rule), centred (each box centred on its interval)",
+    )
+
+
+def interval_model(switches: tuple[str, ...]) -> Any:
+    """The :class:`~risk_env.highway.lanes.interval.IntervalModel` with ``switches`` (of
+    :data:`INTERVAL_SWITCHES`) on, the rest at their defaults."""
+    from risk_env.highway.lanes.interval import IntervalModel
+
+    return IntervalModel(**dict.fromkeys(switches, True))

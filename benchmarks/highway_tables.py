@@ -129,6 +129,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f", corridor {getattr(args, 'corridor', 1.0):g} m"
         f", junction gate {'on' if getattr(args, 'gate', True) else 'off'}"
         f"{'' if getattr(args, 'lane_pieces', 1) == 1 else f', lane predictor in {args.lane_pieces} pieces'}"
+        f"{', interval switches on: ' + ', '.join(args.interval) if getattr(args, 'interval', ()) else ''}"
         "; the MPCs plan with the"
         f" predictor in brackets. Risk scored by RiskCostWrapper (exact, severity {args.severity},"
         f" predictor {args.predictor[0]}). The MPCs' wall-time cap per step: {cap}. Wall time"

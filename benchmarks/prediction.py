@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks import cli
+from benchmarks.highway_agents import add_interval_option
 from benchmarks.prediction_figure import draw
 from benchmarks.prediction_samples import KEYS, PHASES, STEPS, make_predictors, record_episode, score_episode
 from benchmarks.sweep import run_sweep
@@ -78,7 +79,7 @@ def run_chunk(job: tuple[list[int], argparse.Namespace]) -> dict[str, dict[str, 
     parts: dict[str, list[dict[str, np.ndarray]]] = defaultdict(list)
     for seed in seeds:
         steps = record_episode(env, seed)
-        predictors = make_predictors(args.predictors, env, args.uncertainty)
+        predictors = make_predictors(args.predictors, env, args.uncertainty, args.interval)
         for name, samples in score_episode(steps, predictors, args.mode_threshold).items():
             if samples:
                 parts[name].append(samples)
@@ -183,6 +184,7 @@ def markdown(rows: list[dict[str, Any]], args: argparse.Namespace, command: str,
         f" seeds {args.seed}..{args.seed + args.episodes - 1}"
         f" ({args.episodes} episodes of {args.duration:g} s, ego: highway-env's IDM); mode threshold"
         f" w_min = {args.mode_threshold:g}; constant predictor at the {args.uncertainty!r} level."
+        f"{' Interval switches on: ' + ', '.join(args.interval) + '.' if args.interval else ''}"
         f" Wall time {wall:.0f} s.",
         "",
         *targets(rows),
@@ -226,6 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--uncertainty", choices=UNCERTAINTY_PRESETS, default="low", help="the constant predictor's level"
     )
+    add_interval_option(parser)
     parser.add_argument("--no-figures", action="store_true", help="skip prediction.png")
     parser.add_argument(
         "--workers", type=cli.positive_int, default=None, help="processes (default: all cores)"
@@ -263,7 +266,7 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
 
             env = make_intersection_env(duration=args.duration)
             steps = record_episode(env, args.seed)
-            predictors = make_predictors(args.predictors, env, args.uncertainty)
+            predictors = make_predictors(args.predictors, env, args.uncertainty, args.interval)
             network = env.unwrapped.road.network
             figure = out.dir / "prediction.png"
             draw(steps, network, predictors, STEPS, args.mode_threshold, args.seed, figure)

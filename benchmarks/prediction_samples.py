@@ -73,7 +73,11 @@ def _inside(mode: Any, n: int, point: np.ndarray) -> tuple[bool, float]:
 def brier(mixture: Any, taken: tuple[str, ...]) -> float:
     """The Brier score of ``mixture``'s route weights against the route ``taken`` (its nodes); NaN
     when its modes carry no routes."""
-    routes = [route for mode in mixture for route in getattr(mode, "routes", ())]
+    weights: dict[str, float] = {}  # a route's weight over its modes (held and free are one route)
+    for mode in mixture:
+        for label, w in getattr(mode, "routes", ()):
+            weights[label] = weights.get(label, 0.0) + w
+    routes = list(weights.items())
     if not routes:
         return float("nan")
     joined = ">" + ">".join(taken) + ">"
@@ -142,8 +146,13 @@ def score_episode(
     }
 
 
-def make_predictors(names: list[str], env: Any, uncertainty: str) -> dict[str, Any]:
-    """The predictors ``names`` for ``env`` (its road network, its step)."""
+def make_predictors(
+    names: list[str], env: Any, uncertainty: str, interval: tuple[str, ...] = ()
+) -> dict[str, Any]:
+    """The predictors ``names`` for ``env`` (its road network, its step); ``interval``: the
+    switches of ``lane+interval``'s :class:`~risk_env.highway.lanes.interval.IntervalModel` to turn
+    on."""
+    from benchmarks.highway_agents import interval_model
     from risk_env.highway import LanePredictor, highway_scenario, policy_period
     from risk_env.prediction import ConstantPredictor
 
@@ -152,7 +161,10 @@ def make_predictors(names: list[str], env: Any, uncertainty: str) -> dict[str, A
         if name == "constant":
             out[name] = ConstantPredictor(highway_scenario(env, uncertainty))
         elif name == "lane+interval":  # the ego is one of the recorded scene's road users
-            out[name] = LanePredictor(env.unwrapped.road.network, policy_period(env), longitudinal="interval")
+            intervals = interval_model(interval)
+            out[name] = LanePredictor(
+                env.unwrapped.road.network, policy_period(env), longitudinal="interval", intervals=intervals
+            )
         else:
             out[name] = LanePredictor(env.unwrapped.road.network, policy_period(env))
     return out

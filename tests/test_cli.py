@@ -255,8 +255,10 @@ TEXT = {
     "name": ["", "../../escape", "a/b", ".hidden"],
     "uncertainty": ["", "extreme"],
     "tolerances": ["", "-5", "x"],
+    "interval": ["bogus", "split_yield,bogus"],
 }
-"""Bad values of the plain-text flags (train_ppo's --name, --uncertainty, --tolerances)."""
+"""Bad values of the plain-text flags (train_ppo's --name, --uncertainty, --tolerances; the
+highway benchmarks' --interval)."""
 
 
 def bad_values(action: argparse.Action) -> list[str]:

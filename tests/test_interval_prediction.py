@@ -88,7 +88,10 @@ def test_the_boxes_hold_highway_env_vehicles_with_sampled_parameters(straight, s
 def test_the_interval_boxes_are_smaller_than_and_within_the_full_range_ones(env, straight):
     measurements, _ = rollout(straight, 0)
     full = LanePredictor(straight, T).predict_scene(measurements, STEPS)
-    interval = LanePredictor(straight, T, longitudinal="interval").predict_scene(measurements, STEPS)
+    whole = IntervalModel(split_yield=False, centred=False)  # one box per route, about the mean
+    interval = LanePredictor(straight, T, longitudinal="interval", intervals=whole).predict_scene(
+        measurements, STEPS
+    )
     for a, b in zip(full, interval, strict=True):
         wide, tight = a.modes[0].beliefs, b.modes[0].beliefs
         assert np.all(tight.x - tight.half_x >= wide.x - wide.half_x - 1e-9)
@@ -101,7 +104,7 @@ def test_the_interval_boxes_are_smaller_than_and_within_the_full_range_ones(env,
     scene = np.array([vehicle_measurement(v) for v in road.vehicles])
     full = LanePredictor(road.network, T).predict_scene(scene, STEPS)
     for margin in (0.0, IntervalModel().margin_turn):
-        intervals = IntervalModel(margin_turn=margin)
+        intervals = IntervalModel(margin_turn=margin, split_yield=False, centred=False)
         interval = LanePredictor(road.network, T, longitudinal="interval", intervals=intervals)
         for a, b in zip(full, interval.predict_scene(scene, STEPS), strict=True):
             assert [m.label for m in a] == [m.label for m in b]
@@ -139,6 +142,8 @@ def test_the_name_reaches_the_adapter_and_the_benchmark(env):
     predictor = highway_predictor("lane+interval", env, pieces=2)
     assert predictor.name == "lane+interval" and predictor.longitudinal == "interval"
     assert predictor.pieces == 2 and predictor.max_modes == 6
+    split = highway_predictor("lane+interval", env, intervals=IntervalModel(split_yield=True))
+    assert split.max_modes == 6  # 3 turns, held and free
     assert np.allclose(predictor.ego(), vehicle_measurement(env.unwrapped.vehicle))
     assert highway_predictor("lane", env).name == "lane"
     args = highway_intersection.parse_args(["--predictor", "lane+interval", "--lane-pieces", "2"])
@@ -146,6 +151,13 @@ def test_the_name_reaches_the_adapter_and_the_benchmark(env):
     driver = make_driver(resolve("rmpc", "probability", 0.05), env, args, "lane+interval")
     built = driver._predictor_arg  # the adapter builds a named one at its first episode
     assert built.name == "lane+interval" and built.pieces == 2
+    args = highway_intersection.parse_args(
+        ["--predictor", "lane+interval", "--interval", "split_yield,centred"]
+    )
+    built = make_driver(resolve("rmpc", "probability", 0.05), env, args, "lane+interval")._predictor_arg
+    assert built.intervals.split_yield and built.intervals.centred and built.pieces == 1
+    with pytest.raises(ValueError, match="intervals need the predictor 'lane\\+interval'"):
+        highway_predictor("lane", env, intervals=IntervalModel())
 
 
 def test_bad_names_and_numbers_are_named(env, straight):

@@ -52,6 +52,7 @@ import numpy as np
 from risk_env import checks
 from risk_env.highway.common import unwrapped_highway
 from risk_env.highway.lane_agents import lane_scenario
+from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
 from risk_env.highway.route import RoutePath
 from risk_env.models.frame import to_frame
 from risk_env.prediction.belief import Belief
@@ -176,6 +177,7 @@ class JunctionGate:
         dt: float,
         margin: float = GATE_MARGIN,
         threshold: float = GATE_THRESHOLD,
+        given_ego: bool = False,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -188,6 +190,8 @@ class JunctionGate:
         self.reach, self.accel, self.speed_cap = float(reach), float(accel), math.inf
         self.half_length, self.dt = float(half_length), float(dt)
         self.margin, self.threshold = float(margin), float(threshold)
+        self.given_ego = bool(given_ego)
+        """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.clearance = min(self.reach, GATE_CLEARANCE)
         """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
         the ego's centre has cleared a point)."""
@@ -238,7 +242,7 @@ class JunctionGate:
         ego_out = travel_time(s + self.clearance - progress, speed, self.accel, self.speed_cap)
         steps = min(GATE_STEPS, math.ceil((float(ego_out.max()) + self.margin) / self.dt))
         slack = math.inf
-        for mixture in self.predictor.predict_scene(np.asarray(others, dtype=float), steps):
+        for mixture in self._predict(np.asarray(others, dtype=float), steps):
             first, last = occupancy(mixture, points, self.clearance, self.dt, self.threshold)
             # apart: it comes after the ego has cleared the point, or has left before the ego comes
             slack = min(slack, float(np.min(np.maximum(first - ego_out, ego_in - last))))
@@ -246,6 +250,16 @@ class JunctionGate:
         self.closed_steps += closed
         self.last = GateDecision(closed, False, slack)
         return self.last
+
+    def _predict(self, others: np.ndarray, steps: int) -> list[Mixture]:
+        """The others' mixtures: given that the ego goes now (its route, ``accel`` up to
+        :attr:`speed_cap`), where the predictor can condition on the ego (the lane predictor with the
+        interval prediction and an ego, :class:`~risk_env.highway.lanes.predictor.EgoPlan`), so that
+        traffic that would follow the ego into its exit brakes behind it, as highway-env's does."""
+        if self.given_ego and isinstance(self.predictor, LanePredictor) and self.predictor.ego is not None:
+            plan = EgoPlan(tuple(self.route.lanes), self.accel, self.speed_cap)
+            return self.predictor.predict_scene(others, steps, ego_plan=plan)
+        return self.predictor.predict_scene(others, steps)
 
     def step(self, progress: float, speed: float, others: np.ndarray) -> np.ndarray:
         """:meth:`decide`, and the objects the MPC gets from the gate ``(0 or 1, 5)``: the virtual

@@ -21,10 +21,14 @@ HIGHWAY_PREDICTORS: tuple[str, ...] = PREDICTOR_NAMES
 ``"lane+interval"``."""
 
 
-def highway_predictor(predictor: str | Predictor | None, env: Any, pieces: int = 1) -> Predictor | None:
+def highway_predictor(
+    predictor: str | Predictor | None, env: Any, pieces: int = 1, intervals: Any = None
+) -> Predictor | None:
     """The predictor named ``predictor`` for ``env``'s road network and step, an instance as is,
     or None for the paper's (``None`` or ``"constant"``); an unknown name raises ``ValueError``
-    naming it. ``pieces``: the lane predictors' P (bands along each route, one mode each)."""
+    naming it. ``pieces``: the lane predictors' P (bands along each route, one mode each);
+    ``intervals``: ``"lane+interval"``'s :class:`~risk_env.highway.lanes.interval.IntervalModel`
+    (None: its defaults)."""
     if predictor is None or isinstance(predictor, Predictor):
         return predictor
     name = checks.text("predictor", predictor, HIGHWAY_PREDICTORS)
@@ -34,7 +38,11 @@ def highway_predictor(predictor: str | Predictor | None, env: Any, pieces: int =
 
     network, dt = unwrapped_highway(env).road.network, policy_period(env)
     if name == "lane+interval":
-        return LanePredictor(network, dt, pieces=pieces, longitudinal="interval", ego=ego_reader(env))
+        return LanePredictor(
+            network, dt, pieces=pieces, longitudinal="interval", intervals=intervals, ego=ego_reader(env)
+        )
+    if intervals is not None:
+        raise ValueError(f"intervals need the predictor 'lane+interval', got {name!r}")
     return LanePredictor(network, dt, pieces=pieces)
 
 

@@ -83,6 +83,7 @@ def mode_beliefs(
     piece: tuple[int, int] = (0, 1),
     bounds: tuple[np.ndarray, ...] | None = None,
     margin_turn: float = 0.0,
+    centred: bool = False,
 ) -> Belief:
     """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
 
@@ -96,7 +97,7 @@ def mode_beliefs(
     ``bounds``: ``(s_lo, s_hi, v_lo, v_hi)`` ``(R, N+1)`` of the mode's routes (the interval
     prediction, :func:`~risk_env.highway.lanes.interval.interval_bounds`) instead of full braking to
     full acceleration, clipped to that full range; ``margin_turn`` [m] is added across where the
-    route curves at the mean."""
+    route curves at the mean; ``centred``: the mean along the route at the middle of ``bounds``."""
     steps = s.shape[1] - 1
     t = np.arange(steps + 1) * dt
     s_mean, v_mean = share @ s, share @ v
@@ -114,6 +115,8 @@ def mode_beliefs(
             np.clip(hi.max(axis=0) + spread.margin_along, s_lo, s_hi),
         )
         v_lo, v_hi = np.clip(slow.min(axis=0), v_lo, v_hi), np.clip(fast.max(axis=0), v_lo, v_hi)
+        if centred:  # the box is symmetric about the mean: centred on the interval, it is no longer
+            s_mean = (s_lo + s_hi) / 2  # than the interval (about the IDM's mean: up to twice)
     j, pieces = piece
     if pieces > 1:
         band = (s_hi - s_lo) / pieces

@@ -7,8 +7,9 @@ vehicle, the exponent $\delta$ uniformly in ``DELTA_RANGE`` = [3.5, 4.5]
 lane's limit when it stops yielding and to 0 while it yields; $A$, $B$, $d_0$, $\tau$ and the clip
 $a_{max}$ are the class's own numbers. Following Leurent's interval predictor
 (``highway_env.vehicle.uncertainty.prediction.IntervalVehicle``), which propagates the state
-interval through the IDM with its parameters in a box, each road user's routes are moved twice,
-every road user of the scene together (the speed model of :mod:`~risk_env.highway.lanes.speed`):
+interval through the IDM with its parameters in a box, each road user's routes are moved twice
+(four times when split, below), every road user of the scene together (the speed model of
+:mod:`~risk_env.highway.lanes.speed`):
 
 - **fast** (the upper bound): $\delta$ at the top of its range and the desired speed at the lane's
   limit (while $v \le v_0$ the IDM's free term grows with both), behind the leaders' fast
@@ -23,6 +24,17 @@ every road user of the scene together (the speed model of :mod:`~risk_env.highwa
   measured speed (a vehicle that does not yield never wants less than it drives), behind the
   nearest of every route hypothesis of every other road user, and yielding to any of them under
   the regulation's rule; the ego (when the predictor is given one) brakes fully.
+- **Held or free** (:attr:`IntervalModel.split_yield`, :class:`IntervalBounds`): one box over
+  both runs holds a road user that stops at its line (it yields, in the slow run) and one that
+  drives through (the fast run), so that once its box reaches a point it stays there to the end
+  of the prediction. A road user the slow run holds (it yields, or waits behind one that does) is
+  therefore split in two: *held* (the slow run, and a fast run that yields to everyone as the slow
+  one does) and *free* (the fast run, and a slow run in which nobody yields), weighted by the
+  rule's chance: the weight of the routes of the road users it yields to that it yields to.
+- **Given the ego** (``ego_motion``, the junction gate's question "what if I go now"): the ego
+  drives on in every run, accelerating up to its speed, instead of braking, never yielding (as
+  highway-env leaves its controlled vehicle), so that traffic that would follow it brakes
+  behind it.
 
 The IDM's acceleration grows with the leader's position and speed and falls with the follower's
 own position, so a follower behind its leader's upper (lower) future tends to stay at or below
@@ -32,7 +44,10 @@ vehicles spawn; the prediction benchmark measures how often they hold. The bound
 the runs' and the mean's extremes widened by ``margin_rate`` times the time (the regulation's check
 phase, 0.5 s, is not observed, nor is the simulation's 1/16 s step), clipped to the lane
 predictor's full range (full braking to full acceleration), so that along the lane an interval box
-lies within the full-range one; across a curving route the box widens by ``margin_turn``.
+lies within the full-range one; across a curving route the box widens by ``margin_turn``. A box is
+symmetric about its mode's mean, so the mean is put at the interval's middle
+(:attr:`IntervalModel.centred`): about the IDM's mean run, the box would reach as far behind the
+mean as the fast run reaches ahead of it.
 """
 
 from __future__ import annotations
@@ -67,6 +82,13 @@ class IntervalModel:
     """Whether the fast run obeys the yielding rule (as the mean does) instead of never yielding."""
     ego_brakes: bool = True
     """Whether the ego brakes fully in the slow run (else it follows the slow IDM)."""
+    split_yield: bool = False
+    """Split each road user's box into a *held* mode (it yields, or waits behind one that does) and a
+    *free* one (it drives on), weighted by the yielding rule's chance (:class:`IntervalBounds`),
+    instead of one box that holds both."""
+    centred: bool = False
+    """Whether a mode's mean along the route lies at the middle of its interval (its box, which is
+    symmetric about the mean, then no longer than the interval) instead of at the IDM's mean run."""
     ego_leads: bool = True
     """Whether the ego brakes fully in the fast run too (else it follows the fast IDM): a road user
     behind the ego on its lane is then bounded behind an ego that stops, so that no box of it
@@ -81,7 +103,7 @@ class IntervalModel:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"IntervalModel.{name} must be a finite number >= 0, got {value!r}")
-        for name in ("upper_yields", "ego_brakes", "ego_leads"):
+        for name in ("upper_yields", "ego_brakes", "ego_leads", "split_yield", "centred"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"IntervalModel.{name} must be a bool, got {getattr(self, name)!r}")
 
@@ -93,6 +115,47 @@ def lane_only(model: SpeedModel) -> SpeedModel:
     return SpeedModel(model.network, model.model, LaneTable(model.network, connected=False))
 
 
+HELD_GAP = 1.0
+"""How far [m] the slow run must end behind the slow run in which nobody yields for a road user to
+count as held (it yields, or waits behind one that does)."""
+
+Bounds = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""``(s_lo, s_hi, v_lo, v_hi)``, each ``(A, N+1)`` [m, m/s]."""
+
+
+@dataclass(frozen=True)
+class IntervalBounds:
+    """The interval prediction of every agent (:func:`interval_bounds`).
+
+    ``union`` bounds every run (one box that holds both yielding and driving on). With
+    :attr:`IntervalModel.split_yield`, ``held`` bounds the runs in which the road users follow the
+    yielding rule (the slow run and a fast run that yields as it does), ``free`` those in which
+    nobody yields (the fast run and a slow run without the rule), and ``chance`` ``(A,)`` is the
+    probability that the agent is held: the rule's chance at its first yield in the slow run
+    (:meth:`SpeedModel.run`'s ``yields``), or, for one that only waits behind a yielding road user,
+    the largest such chance of the scene; 0 where the slow run is not held."""
+
+    union: Bounds
+    held: Bounds | None = None
+    free: Bounds | None = None
+    chance: np.ndarray | None = None
+
+    def part(self, rows: slice | np.ndarray) -> IntervalBounds:
+        """The bounds of the agents ``rows``."""
+
+        def cut(b: Bounds | None) -> Bounds | None:
+            return None if b is None else tuple(x[rows] for x in b)  # type: ignore[return-value]
+
+        chance = None if self.chance is None else self.chance[rows]
+        return IntervalBounds(cut(self.union), cut(self.held), cut(self.free), chance)  # type: ignore[arg-type]
+
+
+def _envelope(runs: list[tuple[np.ndarray, np.ndarray]], margin: np.ndarray) -> Bounds:
+    s = np.stack([r[0] for r in runs])
+    v = np.stack([r[1] for r in runs])
+    return s.min(axis=0) - margin, s.max(axis=0) + margin, v.min(axis=0), v.max(axis=0)
+
+
 def interval_bounds(
     model: SpeedModel,
     agents: Agents,
@@ -102,16 +165,25 @@ def interval_bounds(
     mean: tuple[np.ndarray, np.ndarray],
     ego: np.ndarray | None = None,
     lane_model: SpeedModel | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(s_lo, s_hi, v_lo, v_hi)``, each ``(A, steps+1)`` [m, m/s]: each agent's arc length and
-    speed bounds from the slow and fast runs and the ``mean`` ``(s, v)``, widened by the margin
-    (before the clip to the full range, which :func:`~risk_env.highway.lanes.beliefs.mode_beliefs`
-    applies). ``ego``: ``(A,)`` bool, the agents that stand for the ego. ``lane_model``: ``model``
-    with the leader search on the own lane only (:func:`lane_only`, built once by the caller)."""
+    ego_motion: tuple[float, float] | None = None,
+) -> IntervalBounds:
+    """Each agent's arc length and speed bounds from the slow and fast runs and the ``mean``
+    ``(s, v)`` ``(A, steps+1)``, widened by the margin (before the clip to the full range, which
+    :func:`~risk_env.highway.lanes.beliefs.mode_beliefs` applies), split into held and free with
+    :attr:`IntervalModel.split_yield`. ``ego``: ``(A,)`` bool, the agents that stand for the ego.
+    ``lane_model``: ``model`` with the leader search on the own lane only (:func:`lane_only`,
+    built once by the caller). ``ego_motion`` ``(a, v)``: the ego drives on, accelerating at a
+    [m/s²] up to v [m/s], in every run (a prediction given that the ego goes), instead of braking."""
     count = len(agents.vehicle)
     ego = np.zeros(count, dtype=bool) if ego is None else np.asarray(ego, dtype=bool)
     low, high = (float(x) for x in intervals.delta)
-    fast_s, fast_v = (lane_only(model) if lane_model is None else lane_model).run(
+    lane_model = lane_only(model) if lane_model is None else lane_model
+    everyone = np.arange(count)
+    none = np.zeros(count, dtype=bool)
+    going = ego_motion is not None
+    fast_ego = ego if (intervals.ego_leads or going) else none
+    ego_rule = {"script": ego_motion, "exempt": ego if going else None}
+    fast = lane_model.run(
         agents,
         steps,
         dt,
@@ -119,22 +191,39 @@ def interval_bounds(
         target=np.full(count, np.inf),
         yielding=intervals.upper_yields,
         partners=np.flatnonzero(agents.representative),
-        braking=ego if intervals.ego_leads else np.zeros(count, dtype=bool),
+        scripted=fast_ego,
+        **ego_rule,
     )
-    slow_s, slow_v = model.run(
+    slow_options = {
+        "delta": np.full(count, low),
+        "target": np.maximum(agents.v, 0.0),
+        "partners": everyone,
+        "scripted": ego if (intervals.ego_brakes or going) else none,
+        **ego_rule,
+    }
+    first_yield = np.zeros(count)
+    slow = model.run(agents, steps, dt, yielding=model.model.yielding, yields=first_yield, **slow_options)
+    margin = intervals.margin_rate * np.arange(steps + 1) * dt
+    union = _envelope([slow, fast, mean], margin)
+    if not (intervals.split_yield and model.model.yielding):
+        return IntervalBounds(union)
+    free_slow = model.run(agents, steps, dt, yielding=False, **slow_options)
+    held = (first_yield > 0) | (slow[0][:, -1] < free_slow[0][:, -1] - HELD_GAP)
+    if not held.any():
+        return IntervalBounds(union, chance=np.zeros(count))
+    held_fast = lane_model.run(
         agents,
         steps,
         dt,
-        delta=np.full(count, low),
-        target=np.maximum(agents.v, 0.0),
-        yielding=model.model.yielding,
-        partners=np.arange(count),
-        braking=ego if intervals.ego_brakes else np.zeros(count, dtype=bool),
+        delta=np.full(count, high),
+        target=np.full(count, np.inf),
+        yielding=True,
+        partners=everyone,
+        scripted=fast_ego,
+        **ego_rule,
     )
-    s, v = mean
-    margin = intervals.margin_rate * np.arange(steps + 1) * dt
-    s_lo = np.minimum(np.minimum(slow_s, fast_s), s) - margin
-    s_hi = np.maximum(np.maximum(slow_s, fast_s), s) + margin
-    v_lo = np.minimum(np.minimum(slow_v, fast_v), v)
-    v_hi = np.maximum(np.maximum(slow_v, fast_v), v)
-    return s_lo, s_hi, v_lo, v_hi
+    waiting = held & (first_yield == 0)
+    chance = np.where(first_yield > 0, first_yield, np.where(waiting, first_yield.max(), 0.0))
+    return IntervalBounds(
+        union, _envelope([slow, held_fast], margin), _envelope([free_slow, fast], margin), chance
+    )

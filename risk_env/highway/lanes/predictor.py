@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -51,12 +50,20 @@ import numpy as np
 from risk_env import checks
 from risk_env.highway.common import SPEED_BOUND
 from risk_env.highway.lanes.beliefs import Spread, mode_beliefs
-from risk_env.highway.lanes.interval import LONGITUDINAL, IntervalModel, interval_bounds, lane_only
+from risk_env.highway.lanes.hypotheses import EgoPlan, Hypotheses, agents_of, planned
+from risk_env.highway.lanes.interval import (
+    LONGITUDINAL,
+    IntervalBounds,
+    IntervalModel,
+    interval_bounds,
+    lane_only,
+)
+from risk_env.highway.lanes.modes import LaneMode, mode_parts
 from risk_env.highway.lanes.routes import Route, check_lane, lane_distance, next_lanes, routes_from, wrap
-from risk_env.highway.lanes.speed import Agents, SpeedModel, TrafficModel, reach
+from risk_env.highway.lanes.speed import SpeedModel, TrafficModel, reach
 from risk_env.highway.lanes.table import ON_LANE_MARGIN
 from risk_env.highway.lanes.weights import WeightModel, route_weights, turn_of
-from risk_env.prediction.mixture import Mixture, Mode
+from risk_env.prediction.mixture import Mixture
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
 from risk_env.scenario.scenario import Scenario
 
@@ -64,28 +71,6 @@ ORDER = ("straight", "left", "right")
 """The order of a road user's modes by turn: of equally likely modes the first is the most likely
 one (:meth:`Mixture.most_likely <risk_env.prediction.mixture.Mixture.most_likely>`), and straight on
 lies between the turns."""
-
-
-@dataclass(frozen=True)
-class LaneMode(Mode):
-    """A :class:`~risk_env.prediction.mixture.Mode` of the lane predictor, with the routes it stands
-    for; its beliefs lie in the lane's frame (:attr:`Belief.frame
-    <risk_env.prediction.belief.Belief.frame>`: ``sigma_x``/``half_x`` along the lane,
-    ``sigma_y``/``half_y`` across it)."""
-
-    routes: tuple[tuple[str, float], ...] = ()
-    """The routes this mode stands for, ``(label, weight)``, labels as :meth:`Route.label
-    <risk_env.highway.lanes.routes.Route.label>`; their weights sum to the mode's."""
-
-
-@dataclass
-class _Hypotheses:
-    routes: list[Route]
-    starts: np.ndarray
-    offsets: np.ndarray
-    weights: np.ndarray
-    groups: list[list[int]]
-    labels: list[str]
 
 
 class LanePredictor(Predictor):
@@ -174,6 +159,8 @@ class LanePredictor(Predictor):
                 f"ego must be a callable returning a measurement, or None, got {checks.describe(ego)}"
             )
         self.ego = ego
+        if longitudinal == "interval" and self.intervals.split_yield:
+            self.max_modes *= 2  # held and free
         self.speed_model = SpeedModel(road_network, self.traffic)
         self._lane_model = lane_only(self.speed_model) if longitudinal == "interval" else None
         self._routes: dict[tuple, Route] = {}
@@ -203,11 +190,19 @@ class LanePredictor(Predictor):
         )[0]
 
     def predict_scene(
-        self, measurements: Any, steps: int, lanes: Any = None, signals: Any = None
+        self,
+        measurements: Any,
+        steps: int,
+        lanes: Any = None,
+        signals: Any = None,
+        ego_plan: EgoPlan | None = None,
     ) -> list[Mixture]:
         """One mixture per road user of ``measurements (m, 5)``, all moved together (leaders,
         yielding). ``lanes``: None, or one lane index (or None) per road user; ``signals``: None, or
-        one turn signal ``(2,)`` (or None) per road user."""
+        one turn signal ``(2,)`` (or None) per road user. ``ego_plan``: with the interval prediction
+        and an ``ego``, the prediction given that the ego drives so (:class:`EgoPlan`: on its
+        route, never yielding, the others reacting to it as highway-env's traffic does) instead of
+        braking."""
         rows = np.asarray(measurements, dtype=float)
         if rows.ndim != 2 or rows.shape[1] != 5 or not np.all(np.isfinite(rows)):
             raise ValueError(
@@ -229,13 +224,35 @@ class LanePredictor(Predictor):
             )
             for i, (row, lane, signal) in enumerate(zip(rows, lanes, signals, strict=True))
         ]
-        agents = self._agents(rows, hypotheses)
-        s, v = self.speed_model.run(agents, steps, self.dt) if len(agents.vehicle) else (None, None)
+        if ego is not None and ego_plan is not None and hypotheses[-1] is not None:
+            hypotheses[-1] = planned(hypotheses[-1], ego_plan)
+        motion = None if ego is None or ego_plan is None else (float(ego_plan.accel), float(ego_plan.speed))
+        agents = agents_of(rows, hypotheses)
+        is_ego = agents.vehicle == users if ego is not None else np.zeros(len(agents.vehicle), dtype=bool)
+        s, v = (
+            self.speed_model.run(
+                agents,
+                steps,
+                self.dt,
+                scripted=is_ego if motion else None,
+                script=motion,
+                exempt=is_ego if motion else None,
+            )
+            if len(agents.vehicle)
+            else (None, None)
+        )
         bounds = None
         if self.longitudinal == "interval" and len(agents.vehicle):
-            is_ego = agents.vehicle == users if ego is not None else None
             bounds = interval_bounds(
-                self.speed_model, agents, steps, self.dt, self.intervals, (s, v), is_ego, self._lane_model
+                self.speed_model,
+                agents,
+                steps,
+                self.dt,
+                self.intervals,
+                (s, v),
+                is_ego,
+                self._lane_model,
+                motion,
             )
         out: list[Mixture] = []
         first = 0
@@ -247,9 +264,7 @@ class LanePredictor(Predictor):
                 continue
             part = slice(first, first + len(hyp.routes))
             out.append(
-                self._mixture(
-                    row, hyp, s[part], v[part], None if bounds is None else [b[part] for b in bounds]
-                )
+                self._mixture(row, hyp, s[part], v[part], None if bounds is None else bounds.part(part))
             )
             first += len(hyp.routes)
         return out
@@ -309,7 +324,7 @@ class LanePredictor(Predictor):
 
     def _hypotheses(
         self, row: np.ndarray, steps: int, lane: Any, signal: np.ndarray | None, s: np.ndarray, r: np.ndarray
-    ) -> _Hypotheses | None:
+    ) -> Hypotheses | None:
         point, theta, v = row[:2], float(row[2]), float(row[3])
         starts = self._start_lanes(point, theta, lane, s, r)
         if not starts:
@@ -338,34 +353,11 @@ class LanePredictor(Predictor):
             reached = route.lanes[: int(route.lane_of(s0 + max(furthest, 0.0))) + 1]
             groups.setdefault(reached, []).append(k)
         labels = [">".join([key[0][0], *(index[1] for index in key)]) for key in groups]
-        return _Hypotheses(chosen, located[:, 0], located[:, 1], weights, list(groups.values()), labels)
-
-    @staticmethod
-    def _agents(rows: np.ndarray, hypotheses: list[_Hypotheses | None]) -> Agents:
-        vehicle, routes, s, r, v, rep = [], [], [], [], [], []
-        for i, (row, hyp) in enumerate(zip(rows, hypotheses, strict=True)):
-            if hyp is None:
-                continue
-            best = int(np.argmax(hyp.weights))
-            for k, route in enumerate(hyp.routes):
-                vehicle.append(i)
-                routes.append(route)
-                s.append(hyp.starts[k])
-                r.append(hyp.offsets[k])
-                v.append(row[3])
-                rep.append(k == best)
-        return Agents(
-            np.array(vehicle, dtype=int),
-            routes,
-            np.array(s, float),
-            np.array(r, float),
-            np.array(v, float),
-            np.array(rep, dtype=bool),
-        )
+        return Hypotheses(chosen, located[:, 0], located[:, 1], weights, list(groups.values()), labels)
 
     # ------------------------------------------------------------------ beliefs
     def _mixture(
-        self, row: np.ndarray, hyp: _Hypotheses, s: np.ndarray, v: np.ndarray, bounds: list | None
+        self, row: np.ndarray, hyp: Hypotheses, s: np.ndarray, v: np.ndarray, bounds: IntervalBounds | None
     ) -> Mixture:
         """The road user's modes from its routes' arc lengths and speeds ``(R, N+1)`` (and their
         interval bounds, :func:`~risk_env.highway.lanes.interval.interval_bounds`, or None)."""
@@ -375,26 +367,30 @@ class LanePredictor(Predictor):
             total = float(w.sum())
             lead = group[int(np.argmax(w))]
             share = w / total if total > 0 else np.full(len(group), 1.0 / len(group))
-            routes = tuple((hyp.routes[k].label(), float(hyp.weights[k])) for k in group)
-            for j in range(self.pieces):
-                beliefs = mode_beliefs(
-                    self.spread,
-                    hyp.routes[lead],
-                    s[group],
-                    v[group],
-                    share,
-                    float(hyp.starts[lead]),
-                    float(hyp.offsets[lead]),
-                    float(row[3]),
-                    self.dt,
-                    self.traffic.max_acceleration,
-                    self.traffic.lateral_time,
-                    (j, self.pieces),
-                    None if bounds is None else [b[group] for b in bounds],
-                    0.0 if bounds is None else self.intervals.margin_turn,
+            for suffix, part, s_b, v_b, box in mode_parts(group, share, s, v, bounds):
+                routes = tuple(
+                    (hyp.routes[k].label(), float(hyp.weights[k]) * part / self.pieces) for k in group
                 )
-                name = label if self.pieces == 1 else f"{label}#{j + 1}/{self.pieces}"
-                modes.append((total / self.pieces, beliefs, name, routes))
+                for j in range(self.pieces):
+                    beliefs = mode_beliefs(
+                        self.spread,
+                        hyp.routes[lead],
+                        s_b,
+                        v_b,
+                        share,
+                        float(hyp.starts[lead]),
+                        float(hyp.offsets[lead]),
+                        float(row[3]),
+                        self.dt,
+                        self.traffic.max_acceleration,
+                        self.traffic.lateral_time,
+                        (j, self.pieces),
+                        box,
+                        0.0 if bounds is None else self.intervals.margin_turn,
+                        self.intervals.centred,
+                    )
+                    name = label + suffix + ("" if self.pieces == 1 else f"#{j + 1}/{self.pieces}")
+                    modes.append((total * part / self.pieces, beliefs, name, routes))
         norm = sum(m[0] for m in modes)
         share = 1.0 / self.pieces
         return Mixture(tuple(LaneMode(w / norm, b, label, share, routes=r) for w, b, label, r in modes))

@@ -124,6 +124,9 @@ class Agents:
     """``(A,)`` speed [m/s] along the route."""
     representative: np.ndarray
     """``(A,)`` bool: the agent stands for its road user in others' eyes (one per road user)."""
+    weight: np.ndarray | None = None
+    """``(A,)`` the weight of each agent's route among its road user's (summing to 1 per road
+    user); None: all 1 (what :meth:`SpeedModel.run` needs only for its ``yields`` output)."""
 
 
 def _not_zero(x: np.ndarray) -> np.ndarray:
@@ -148,14 +151,24 @@ class SpeedModel:
         target: np.ndarray | None = None,
         yielding: bool | None = None,
         partners: np.ndarray | None = None,
-        braking: np.ndarray | None = None,
+        scripted: np.ndarray | None = None,
+        script: tuple[float, float] | None = None,
+        exempt: np.ndarray | None = None,
+        yields: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         r"""Arc lengths and speeds ``(A, steps+1)`` of every agent at n = 0..steps (step ``dt`` [s]).
         By default with the model's numbers; the interval prediction sets, per agent, the IDM's
         ``delta`` and the initial desired speed ``target`` [m/s] (capped by the lane's limit; default
         the speed, at least the cruise speed), whether anyone ``yielding`` follows the regulation's
         rule, the ``partners`` (indices) that lead and are yielded to (default the representatives)
-        and the agents ``braking`` at full braking to a stop."""
+        and the agents ``scripted`` (``(A,)`` bool) that follow no IDM: at full braking to a stop, or
+        with ``script`` ``(a, v)`` accelerating at a [m/s²] up to v [m/s] (the ego, as it plans).
+        ``exempt`` ``(A,)`` bool: agents that never yield (highway-env's rule leaves the controlled
+        vehicle alone); nobody yields to them either unless they are partners. ``yields``: an
+        ``(A,)`` float array, filled with the probability that each agent yields at the first check
+        at which it yields in this run (0 where it never does): one minus the chance, over the road
+        users it yields to, that none of them is on a route it yields to (their routes'
+        :attr:`Agents.weight`, independent)."""
         m, table = self.model, self.table
         count = len(agents.vehicle)
         samples = _stack([route.samples for route in agents.routes])
@@ -177,6 +190,8 @@ class SpeedModel:
         ticks = max(int(round(m.regulation_period / h)), 1)
         reps = np.flatnonzero(agents.representative) if partners is None else partners
         yielding = m.yielding if yielding is None else yielding
+        if yields is not None:
+            yields[:] = 0.0
         for k in range(steps * m.substeps):
             which = np.maximum((s[:, None] >= offsets).sum(axis=1) - 1, 0)
             lane = lane_ids[rows, which]
@@ -186,13 +201,20 @@ class SpeedModel:
             normal = np.column_stack([-np.sin(heading), np.cos(heading)])
             points = xyh[:, :2] + (agents.r * math.exp(-k * h / m.lateral_time))[:, None] * normal
             if yielding and k % ticks == 0:
-                now = self._yielders(agents, samples, s, v, points, heading, lane, reps)
+                now, chance = self._yielders(agents, samples, s, v, points, heading, lane, reps)
+                if exempt is not None:
+                    now, chance = now & ~exempt, np.where(exempt, 0.0, chance)
+                if yields is not None:
+                    yields[:] = np.where(yields > 0, yields, chance)
                 target = np.where(now, 0.0, np.where(yielded, table.limit[lane], target))
                 yielded = now
             acceleration = self._idm(agents, v, target, points, heading, lane, local, reps, delta)
-            if braking is not None:
-                to_stop = np.maximum(-m.max_acceleration, (np.minimum(v, 0.0) - v) / h)
-                acceleration = np.where(braking, to_stop, acceleration)
+            if scripted is not None:
+                if script is None:  # full braking to a stop
+                    forced = np.maximum(-m.max_acceleration, (np.minimum(v, 0.0) - v) / h)
+                else:
+                    forced = np.clip((script[1] - v) / h, -m.max_acceleration, script[0])
+                acceleration = np.where(scripted, forced, acceleration)
             s = s + v * h
             v = v + acceleration * h
             if (k + 1) % m.substeps == 0:
@@ -258,8 +280,9 @@ class SpeedModel:
         heading: np.ndarray,
         lane: np.ndarray,
         reps: np.ndarray,
-    ) -> np.ndarray:
-        """Which agents yield under the regulation's rule (module docstring)."""
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Which agents yield under the regulation's rule (module docstring) ``(A,)`` bool, and the
+        probability of it ``(A,)`` (see :meth:`run`'s ``yields``)."""
         m = self.model
         times = np.arange(m.conflict_step, m.conflict_horizon, m.conflict_step)
         future = interpolate(samples, s[:, None] + v[:, None] * times[None, :])  # (A, T, 3)
@@ -287,7 +310,14 @@ class SpeedModel:
         )
         out = np.zeros(len(s), dtype=bool)
         out[a[hit]] = True
-        return out
+        # the mass of each (agent, road user yielded to) pair's conflicting routes, counted once per route
+        weight = np.ones(len(s)) if agents.weight is None else agents.weight
+        pairs = np.unique(np.column_stack([a[hit], reps[b[hit]]]), axis=0)
+        users = agents.vehicle[pairs[:, 1]] if len(pairs) else np.zeros(0, dtype=int)
+        mass = np.zeros((len(s), int(agents.vehicle.max(initial=0)) + 1))
+        np.add.at(mass, (pairs[:, 0], users), weight[pairs[:, 1]])
+        chance = 1.0 - np.prod(1.0 - np.clip(mass, 0.0, 1.0), axis=1)
+        return out, np.where(out, chance, 0.0)
 
 
 _CORNERS = (

@@ -1,0 +1,40 @@
+"""``python -m benchmarks.highway_gate``: the gate's verdicts against the future of a copy, on a
+short episode, and its bad input."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+pytest.importorskip("highway_env")
+
+from benchmarks import highway_gate  # noqa: E402
+
+
+def test_a_short_run_judges_the_steps_at_the_line_and_tables_them(tmp_path, monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    out = tmp_path / "gate"
+    argv = ["--episodes", "1", "--duration", "4", "--workers", "1", "--interval", "split_yield"]
+    rows = highway_gate.main([*argv, "--given-ego", "--clearance", "2", "--out", str(out)])
+    assert rows, "the ego reaches the line within 4 s on seed 0"
+    assert all(r["seed"] == 0 and 0 <= r["step"] < 8 for r in rows)
+    steps = [r["step"] for r in rows]
+    assert steps == sorted(set(steps)) and steps == list(range(steps[0], steps[0] + len(steps)))
+    for r in rows:  # a gate that closes gives how much time it missed by; one that opens, its slack
+        assert r["open"] == (r["slack_s"] >= 0.5)
+    with open(out / "gate.csv") as f:
+        assert len(list(csv.DictReader(f))) == len(rows)
+    text = (out / "gate.md").read_text()
+    free, opened = sum(r["free"] for r in rows), sum(r["open"] for r in rows)
+    assert f"| {len(rows)} | {free} (" in text and f"| {opened} (" in text
+    assert "interval switches: split_yield" in text and "given that the ego goes" in text
+
+
+def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        highway_gate.main(["--predictor", "lane", "--interval", "split_yield", "--out", str(tmp_path)])
+    assert "--interval and --given-ego need --predictor lane+interval" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        highway_gate.main(["--interval", "bogus", "--out", str(tmp_path)])
+    assert "unknown interval switch 'bogus'" in capsys.readouterr().err
