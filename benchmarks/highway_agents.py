@@ -179,7 +179,7 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         slots=args.slots,
         predictor=predictor,
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
-        gate=getattr(args, "gate", True),
+        gate=gate_settings(args),
     )
 
 
@@ -218,3 +218,58 @@ def interval_model(switches: tuple[str, ...]) -> Any:
     from risk_env.highway.lanes.interval import IntervalModel
 
     return IntervalModel(**dict.fromkeys(switches, True))
+
+
+def add_gate_options(parser: argparse.ArgumentParser) -> None:
+    """``--signals`` and the junction gate's settings (:class:`risk_env.highway.gate_judge.GateSettings`)."""
+    from risk_env.highway.gate_judge import JUDGES, GateSettings
+
+    defaults = GateSettings()
+    parser.add_argument(
+        "--signals",
+        action="store_true",
+        help="the env observes the other vehicles' turn signals (highway-env's observe_intentions); the"
+        " gate and the MPCs' lane predictor read them",
+    )
+    parser.add_argument(
+        "--gate-judge",
+        choices=JUDGES,
+        default=defaults.judge,
+        help="the gate judges each mode's boxes or mean car",
+    )
+    parser.add_argument(
+        "--gate-tolerance",
+        type=cli.unit_interval,
+        default=defaults.tolerance,
+        help="the chance of a conflict the gate accepts (0: none)",
+    )
+    parser.add_argument(
+        "--gate-clearance",
+        type=cli.positive_float,
+        default=defaults.clearance,
+        help="the gate's clearance [m]",
+    )
+    parser.add_argument(
+        "--gate-margin", type=cli.nonnegative_float, default=defaults.margin, help="the gate's margin [s]"
+    )
+    parser.add_argument(
+        "--gate-given-ego",
+        action="store_true",
+        help="the gate predicts the others given that the ego goes (lane+interval)",
+    )
+
+
+def gate_settings(args: Any) -> Any:
+    """``IntersectionAdapter``'s ``gate`` from the options: False (``--no-gate``), or the settings."""
+    from risk_env.highway.gate_judge import GateSettings
+
+    if not getattr(args, "gate", True):
+        return False
+    defaults = GateSettings()
+    return GateSettings(
+        clearance=getattr(args, "gate_clearance", defaults.clearance),
+        margin=getattr(args, "gate_margin", defaults.margin),
+        judge=getattr(args, "gate_judge", defaults.judge),
+        tolerance=getattr(args, "gate_tolerance", defaults.tolerance),
+        given_ego=getattr(args, "gate_given_ego", defaults.given_ego),
+    )

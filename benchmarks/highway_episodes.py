@@ -172,7 +172,7 @@ def make_env(args: argparse.Namespace, predictor: str) -> Any:
 
     radii = {k: ADAPTER_DEFAULTS[k] for k in ("ego_radius", "object_radius")}
     return RiskCostWrapper(
-        make_intersection_env(version=args.env, **env_config(args)),
+        make_intersection_env(version=args.env, signals=getattr(args, "signals", False), **env_config(args)),
         uncertainty=args.uncertainty,
         estimator="exact",
         severity=args.severity,

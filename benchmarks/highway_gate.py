@@ -67,6 +67,7 @@ def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
     scenario = highway_scenario(env, "low", **ADAPTER_DEFAULTS)  # the adapter's
     gate, _ = make_gate(True, predictor, scenario, env)
     gate.margin, gate.given_ego = args.margin, args.given_ego
+    gate.judge, gate.tolerance = args.judge, args.tolerance
     gate.clearance = min(gate.reach, args.clearance)
     route = RoutePath.of_vehicle(base.road.network, base.vehicle, DESTINATION)
     gate.reset(route, scenario)
@@ -76,9 +77,12 @@ def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
         ego = base.vehicle
         progress = route.progress(0, *ego.position)  # it waits on its route's first lane
         if gate.span[0] - gate.half_length - progress <= AT_LINE:
-            others = np.array([vehicle_measurement(v) for v in base.road.vehicles if v is not ego])
+            vehicles = [v for v in base.road.vehicles if v is not ego]
+            others = np.array([vehicle_measurement(v) for v in vehicles])
+            # what highway-env's observe_intentions shows: the unit vector to each one's destination
+            signals = [v.destination_direction for v in vehicles] if args.signals else None
             gate.committed, gate.last = False, type(gate.last)(False, False)
-            verdict = gate.decide(progress, float(ego.speed), others)
+            verdict = gate.decide(progress, float(ego.speed), others, signals)
             future = copy.deepcopy(base)
             put_ego(future, scheduled_vehicle(future, 0, DESTINATION))
             crashed, _ = outcome(future, DESTINATION)
@@ -118,6 +122,7 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
         return f"{k} ({100 * k / max(n, 1):.1f}% [{100 * lo:.1f}, {100 * hi:.1f}])"
 
     switches = ", ".join(args.interval) or "none"
+    closing = "at any conflict" if args.tolerance == 0 else f"above a conflict chance of {args.tolerance:g}"
     return "\n".join(
         [
             f"`{command}`",
@@ -125,7 +130,11 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
             f"intersection-v2, seeds {args.seed}..{args.seed + args.episodes - 1}, {args.duration:g} s;"
             f" the ego waits at the line; predictor {args.predictor} (interval switches: {switches}),"
             f" clearance {args.clearance:g} m, margin {args.margin:g} s, others predicted"
-            f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}. Wall time"
+            f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}"
+            f"{', turn signals read' if args.signals else ''}; each mode judged by its"
+            f" {'mean car' if args.judge == 'footprint' else 'truncation boxes'}, the gate closing"
+            f" {closing}."
+            " Wall time"
             f" {wall:.0f} s. Rates: of the steps judged (free, opened) or of the free steps (opened"
             " where free) [Wilson 95 %].",
             "",
@@ -141,6 +150,7 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.highway_gate``."""
     from risk_env.highway.gate import GATE_CLEARANCE, GATE_MARGIN
+    from risk_env.highway.gate_judge import JUDGES
     from risk_env.highway.predictors import HIGHWAY_PREDICTORS
 
     parser = cli.parser("highway_gate", __doc__)
@@ -161,6 +171,23 @@ def build_parser() -> argparse.ArgumentParser:
         "--margin", type=cli.nonnegative_float, default=GATE_MARGIN, help="time [s] to spare at each point"
     )
     parser.add_argument(
+        "--judge",
+        choices=JUDGES,
+        default="boxes",
+        help="a mode occupies what its truncation boxes hold, or its mean car (risk_env.highway.gate_judge)",
+    )
+    parser.add_argument(
+        "--tolerance",
+        type=cli.unit_interval,
+        default=0.0,
+        help="the chance of a conflict the gate accepts (0: none; summed over each vehicle's modes)",
+    )
+    parser.add_argument(
+        "--signals",
+        action="store_true",
+        help="the lane predictors read each vehicle's turn signal (highway-env's observe_intentions)",
+    )
+    parser.add_argument(
         "--given-ego",
         action=argparse.BooleanOptionalAction,
         default=False,
@@ -178,6 +205,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     args = parser.parse_args(argv)
     if args.predictor != "lane+interval" and (args.interval or args.given_ego):
         parser.error("--interval and --given-ego need --predictor lane+interval")
+    if args.predictor == "constant" and args.signals:
+        parser.error("--signals needs a lane predictor (--predictor lane or lane+interval)")
     out = cli.open_output(parser, args, "gate", FILES, argv)
     jobs = [([seed], args) for seed in range(args.seed, args.seed + args.episodes)]
     with out:

@@ -52,7 +52,14 @@ from typing import Any
 
 from benchmarks import cli
 from benchmarks.agent_names import REFERENCES
-from benchmarks.highway_agents import DEFAULT_BUDGET, KINDS, add_interval_option, check_budget, resolve
+from benchmarks.highway_agents import (
+    DEFAULT_BUDGET,
+    KINDS,
+    add_gate_options,
+    add_interval_option,
+    check_budget,
+    resolve,
+)
 from benchmarks.highway_episodes import ENV_DEFAULTS, crash_kind, run_chunk
 from benchmarks.highway_tables import markdown, summarise, write_csvs
 from benchmarks.sweep import run_sweep
@@ -147,6 +154,7 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         " each (smaller boxes on curves; the risk is scored with P = 1)",
     )
     add_interval_option(parser)
+    add_gate_options(parser)
     parser.add_argument(
         "--gate",
         action=argparse.BooleanOptionalAction,

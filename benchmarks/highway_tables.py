@@ -130,6 +130,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f", junction gate {'on' if getattr(args, 'gate', True) else 'off'}"
         f"{'' if getattr(args, 'lane_pieces', 1) == 1 else f', lane predictor in {args.lane_pieces} pieces'}"
         f"{', interval switches on: ' + ', '.join(args.interval) if getattr(args, 'interval', ()) else ''}"
+        f"{', turn signals observed' if getattr(args, 'signals', False) else ''}"
+        f"{gate_text(args)}"
         "; the MPCs plan with the"
         f" predictor in brackets. Risk scored by RiskCostWrapper (exact, severity {args.severity},"
         f" predictor {args.predictor[0]}). The MPCs' wall-time cap per step: {cap}. Wall time"
@@ -199,3 +201,15 @@ def write_csvs(folder: Path, prefix: str, summary: list[dict[str, Any]], rows: l
             medians = {k: 1e3 * float(np.median(t)) if t.size else "" for k, t in timed.items()}
             medians["build_steps"] = int(r["built"].sum())
             writer.writerow({k: r[k] for k in EPISODE_FIELDS if k not in medians} | medians)
+
+
+def gate_text(args: Any) -> str:
+    """The gate's settings where the options change them (for the table's header), else ""."""
+    from benchmarks.highway_agents import gate_settings
+    from risk_env.highway.gate_judge import GateSettings
+
+    settings = gate_settings(args)
+    if not settings or settings == GateSettings():
+        return ""
+    changed = {k: v for k, v in vars(settings).items() if v != getattr(GateSettings(), k)}
+    return ", gate " + ", ".join(f"{k} {v}" for k, v in changed.items())

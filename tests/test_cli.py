@@ -243,6 +243,7 @@ NUMBERS = {
     "nonnegative_float": ["-1", "-1e-9", "nan", "inf", "-inf", "x"],
     "finite_float": ["nan", "inf", "-inf", "x", ""],
     "unit_interval_closed": ["-0.1", "1.5", "nan", "x"],
+    "unit_interval": ["-0.1", "1", "1.5", "nan", "x"],
     "discount": ["0", "2", "-1", "nan", "x"],
     "fraction": ["0", "1.5", "-0.5", "nan", "x"],
     "time_cap": ["0", "-1", "nan", "x", ""],

@@ -41,7 +41,6 @@ absolute ``Kinematics`` observation with x, y, vx, vy and heading: :data:`INTERS
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -51,10 +50,14 @@ import numpy as np
 from risk_env import checks
 from risk_env import observation as layout
 from risk_env.highway.common import (
+    INTERSECTION_CONFIG,
+    VERSIONS,
     check_adapter_config,
     highway_scenario,
+    make_intersection_env,
     policy_period,
     slip_angle,
+    turn_signals,
     unwrapped_highway,
 )
 from risk_env.highway.control import highway_action
@@ -67,31 +70,6 @@ from risk_env.highway.tracking import TRACK_GATE, measure
 from risk_env.models.path import path_error_vector, project
 from risk_env.prediction.predictors import Predictor
 from risk_env.scenario.scenario import ReferencePath, Scenario
-
-INTERSECTION_CONFIG: dict[str, Any] = {
-    "action": {
-        "type": "ContinuousAction",
-        "longitudinal": True,
-        "lateral": True,
-        "dynamical": False,
-        "steering_range": [-math.pi / 3, math.pi / 3],
-    },
-    "observation": {
-        "type": "Kinematics",
-        "vehicles_count": 15,
-        "features": ["presence", "x", "y", "vx", "vy", "heading"],
-        "absolute": True,
-        "normalize": False,
-        "see_behind": True,
-        "order": "sorted",
-    },
-    "policy_frequency": 2,
-    "simulation_frequency": 16,
-}
-"""``intersection-v1`` as the adapter needs it: the kinematic vehicle (highway-env's own default for
-``intersection-v1`` is its dynamic bicycle), an unnormalised absolute observation with headings,
-and a step of T = 0.5 s (the paper's sample time: 8 frames at 16 Hz). Everything else, including
-the traffic, the destination ``"o1"`` (a left turn) and the 13 s duration, is highway-env's."""
 
 ADAPTER_DEFAULTS: dict[str, Any] = {
     "v_ref": 8.0,
@@ -107,28 +85,8 @@ lanes' limit and the ego's entry speed are 10), no reversing on a road, $v_{max}
 a corridor of 1 m about the lane's centreline for the planned centre (the 2 m wide car stays in
 its 4 m lane: the MPC may not leave the road to escape a prediction)."""
 
-VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
-"""The intersections the adapter drives. ``intersection-v2`` (default): highway-env 1.12 fixed its
-traffic's neighbour search there and recommends it for new experiments; ``intersection-v1``: the
-earlier traffic, selectable for comparison."""
 DEFAULT_SLOTS = 5
 """The agents' object slots: every observed vehicle up to this many is planned against."""
-
-
-def make_intersection_env(
-    render_mode: str | None = None, version: str = VERSIONS[0], **config: Any
-) -> gym.Env:
-    """``gym.make(version)`` (one of :data:`VERSIONS`) with :data:`INTERSECTION_CONFIG`, updated
-    by ``config``."""
-    from risk_env.highway.common import require_highway_env
-
-    if version not in VERSIONS:
-        raise ValueError(f"unknown intersection {version!r}; expected one of {VERSIONS}")
-    require_highway_env()
-    merged = {**INTERSECTION_CONFIG, **config}
-    with warnings.catch_warnings():  # gymnasium: "intersection-v1 is out of date" (selectable)
-        warnings.simplefilter("ignore", DeprecationWarning)
-        return gym.make(version, render_mode=render_mode, config=merged)
 
 
 class IntersectionAdapter:
@@ -159,7 +117,8 @@ class IntersectionAdapter:
             (``prepare()``; :mod:`risk_env.highway.lane_agents`); False: each when first needed.
         gate: the junction gate (:mod:`risk_env.highway.gate`, default on): before the junction, the
             MPC gets a virtual stationary object at the stop line whenever the ego could not cross
-            the junction before another vehicle's predicted bounds reach its path; False: none.
+            the junction before another vehicle's predicted bounds reach its path; False: none; a
+            :class:`~risk_env.highway.gate_judge.GateSettings`: on, judging so.
     """
 
     def __init__(
@@ -173,7 +132,7 @@ class IntersectionAdapter:
         slots: int = DEFAULT_SLOTS,
         predictor: str | Predictor | None = "lane",
         warm_up: bool = True,
-        gate: bool = True,
+        gate: bool | Any = True,
         **overrides: Any,
     ) -> None:
         if not callable(make_agent):
@@ -206,7 +165,7 @@ class IntersectionAdapter:
         reset)."""
         self._agents: dict[ReferencePath, Any] = {}
         self.gate: JunctionGate | None = None  # the junction gate (None: off), at the first episode
-        self._gate_on = check_gate(gate)
+        self._gate_on = check_gate(gate)  # its settings, or None: off
         self._agent_predictor: Predictor | None = None
         self._ready = False
         self.warm_up = bool(warm_up)
@@ -283,15 +242,15 @@ class IntersectionAdapter:
         if self._vehicle is not base.vehicle or (episode_start is not None and np.any(episode_start)):
             self._begin_episode(base)
         rows = self._rows(observation)
-        ego = rows[0]
-        x, y, heading, speed = ego
+        x, y, heading, speed = rows[0]  # the ego's row
         theta = heading + slip_angle(self._steering)
         switched = self._advance(x, y)
         scenario = self._scenario_for(self.lane)
         others = self._measure_others(rows[1:])
         nearest = np.argsort(np.hypot(others[:, 0] - x, others[:, 1] - y), kind="stable")
         progress = self.route.progress(self.lane, x, y)
-        virtual = np.zeros((0, 5)) if self.gate is None else self.gate.step(progress, speed, others)
+        signals = turn_signals(base, observation)  # None unless the env observes them
+        virtual = np.zeros((0, 5)) if self.gate is None else self.gate.step(progress, speed, others, signals)
         self.last_objects = others[nearest[: self.slots - len(virtual)]]
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
@@ -327,7 +286,7 @@ class IntersectionAdapter:
         self._vehicle = vehicle
         if not self._ready:  # the map is the same at every reset
             self.predictor = highway_predictor(self._predictor_arg, self.env)
-            gate = make_gate(self._gate_on, self.predictor, self.base_scenario, base)
+            gate = make_gate(self._gate_on or False, self.predictor, self.base_scenario, base)
             self.gate, self._agent_predictor = gate
             self._ready = True
         self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
@@ -395,6 +354,8 @@ __all__ = [
     "IntersectionAdapter",
     "LaneIndex",
     "RoutePath",
+    "VERSIONS",
     "lane_path",
+    "make_intersection_env",
     "reached",
 ]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import warnings
 from types import ModuleType
 from typing import Any
 
@@ -132,3 +133,81 @@ def check_adapter_config(base: Any) -> None:
         raise ValueError(f"the adapter needs a Kinematics observation with features {sorted(needed)}; {hint}")
     if not obs.absolute or obs.normalize:
         raise ValueError(f"the adapter needs absolute, unnormalised Kinematics observations; {hint}")
+
+
+SIGNAL_FEATURES = ("cos_d", "sin_d")
+"""highway-env's Kinematics features of a vehicle's turn signal: the unit vector from it to its
+destination, observed with ``observe_intentions`` (else 0)."""
+
+
+def signal_observation(observation: dict[str, Any]) -> dict[str, Any]:
+    """The Kinematics ``observation`` config that also observes the other vehicles' turn signals
+    (:data:`SIGNAL_FEATURES`, ``observe_intentions``)."""
+    features = [f for f in observation["features"] if f not in SIGNAL_FEATURES]
+    return {**observation, "features": [*features, *SIGNAL_FEATURES], "observe_intentions": True}
+
+
+def turn_signals(base: Any, observation: Any) -> list[np.ndarray | None] | None:
+    """The observed turn signals (``(2,)`` each, None where it shows none) of the other present
+    rows of highway-env's Kinematics ``observation`` (in the adapter's order), or None when the env
+    (``base``, unwrapped) does not observe them (:func:`signal_observation`)."""
+    kind = base.observation_type
+    features = list(kind.features)
+    if not getattr(kind, "observe_intentions", False) or not set(SIGNAL_FEATURES) <= set(features):
+        return None
+    obs = np.asarray(observation, dtype=float)
+    present = obs[:, features.index("presence")] > 0.5
+    present[0] = True
+    rows = obs[present][1:]
+    vectors = rows[:, [features.index(f) for f in SIGNAL_FEATURES]]
+    return [v if np.hypot(*v) > 1e-9 else None for v in vectors]
+
+
+INTERSECTION_CONFIG: dict[str, Any] = {
+    "action": {
+        "type": "ContinuousAction",
+        "longitudinal": True,
+        "lateral": True,
+        "dynamical": False,
+        "steering_range": [-math.pi / 3, math.pi / 3],
+    },
+    "observation": {
+        "type": "Kinematics",
+        "vehicles_count": 15,
+        "features": ["presence", "x", "y", "vx", "vy", "heading"],
+        "absolute": True,
+        "normalize": False,
+        "see_behind": True,
+        "order": "sorted",
+    },
+    "policy_frequency": 2,
+    "simulation_frequency": 16,
+}
+"""``intersection-v1`` as the adapter needs it: the kinematic vehicle (highway-env's own default for
+``intersection-v1`` is its dynamic bicycle), an unnormalised absolute observation with headings,
+and a step of T = 0.5 s (the paper's sample time: 8 frames at 16 Hz). Everything else, including
+the traffic, the destination ``"o1"`` (a left turn) and the 13 s duration, is highway-env's."""
+
+VERSIONS: tuple[str, ...] = ("intersection-v2", "intersection-v1")
+"""The intersections the adapter drives. ``intersection-v2`` (default): highway-env 1.12 fixed its
+traffic's neighbour search there and recommends it for new experiments; ``intersection-v1``: the
+earlier traffic, selectable for comparison."""
+
+
+def make_intersection_env(
+    render_mode: str | None = None, version: str = VERSIONS[0], signals: bool = False, **config: Any
+) -> Any:
+    """``gym.make(version)`` (one of :data:`VERSIONS`) with :data:`INTERSECTION_CONFIG`, updated
+    by ``config``; ``signals``: the observation also shows the other vehicles' turn signals
+    (:func:`signal_observation`; the adapter passes them to the gate and the agents' lane predictor)."""
+    import gymnasium as gym
+
+    if version not in VERSIONS:
+        raise ValueError(f"unknown intersection {version!r}; expected one of {VERSIONS}")
+    require_highway_env()
+    merged = {**INTERSECTION_CONFIG, **config}
+    if signals:
+        merged["observation"] = signal_observation(merged["observation"])
+    with warnings.catch_warnings():  # gymnasium: "intersection-v1 is out of date" (selectable)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return gym.make(version, render_mode=render_mode, config=merged)

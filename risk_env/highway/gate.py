@@ -43,6 +43,7 @@ risk (:class:`~risk_env.highway.RiskCostWrapper`) sees highway-env's vehicles on
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -51,14 +52,13 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import unwrapped_highway
+from risk_env.highway.gate_judge import JUDGES, GateSettings, conflict_chance, judged, occupancy, travel_time
 from risk_env.highway.lane_agents import lane_scenario
 from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
 from risk_env.highway.route import RoutePath
-from risk_env.models.frame import to_frame
 from risk_env.prediction.belief import Belief
 from risk_env.prediction.mixture import Mixture
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
-from risk_env.risk.disc import signed_box_distance
 from risk_env.scenario.scenario import Scenario
 
 JUNCTION_PREFIX = "ir"
@@ -74,8 +74,6 @@ GATE_STEPS = 20
 """Most prediction steps the gate looks ahead (10 s at T = 0.5 s)."""
 GATE_RANGE = 40.0
 """Distance [m] of the ego to the junction within which the gate judges (farther: open)."""
-SUBSTEPS = 4
-"""Time samples per prediction step (positions linear in between)."""
 VIRTUAL_SIGMA = 0.05
 """Standard deviation [m] of the virtual object's position (and [m/s] of its speed)."""
 VIRTUAL_HALF = 0.15
@@ -85,6 +83,9 @@ LINE_BUFFER = 1.5
 highway-env's car lags it)."""
 HOLD_GAP = 0.5
 """Gap [m] between the ego's disc and the virtual object when it holds an ego past the line."""
+SIGNAL_MATCH = 0.05
+"""Largest distance [m] between a row an agent's predictor is asked about and an observed road user
+for the row to get that road user's turn signal (float32 observations round by far less)."""
 MATCH = 1e-3
 """Largest difference (float32 observation rounding) between a measurement and the virtual one."""
 
@@ -93,13 +94,17 @@ class GateError(ValueError):
     """A bad value for the junction gate (names the parameter and what was expected)."""
 
 
-def check_gate(gate: Any) -> bool:
-    """``gate`` as a bool (``True``/``False`` only; a :class:`GateError` naming ``gate`` else)."""
+def check_gate(gate: Any) -> GateSettings | None:
+    """``gate`` as the gate's settings (``True``: the defaults), or None (``False``: off); a
+    :class:`GateError` naming ``gate`` for anything else."""
+    if isinstance(gate, GateSettings):
+        return gate
     if not isinstance(gate, (bool, np.bool_)):
         raise GateError(
-            f"gate must be True or False (the junction gate on or off), got {checks.describe(gate)}"
+            f"gate must be True, False (the junction gate on or off) or a GateSettings, got"
+            f" {checks.describe(gate)}"
         )
-    return bool(gate)
+    return GateSettings() if gate else None
 
 
 def junction_span(route: RoutePath) -> tuple[float, float] | None:
@@ -113,40 +118,6 @@ def junction_span(route: RoutePath) -> tuple[float, float] | None:
     while last + 1 < len(inside) and inside[last + 1]:
         last += 1
     return float(route.offsets[first]), float(route.offsets[last] + route.lengths[last])
-
-
-def travel_time(distance: np.ndarray, speed: float, accel: float, cap: float) -> np.ndarray:
-    """Time [s] to cover ``distance`` [m] (``(J,)``, <= 0: 0) from ``speed`` [m/s] accelerating at
-    ``accel`` [m/s^2] up to ``cap`` [m/s]."""
-    d = np.maximum(np.asarray(distance, dtype=float), 0.0)
-    v0 = min(max(float(speed), 0.0), cap)
-    d_acc = (cap**2 - v0**2) / (2.0 * accel)
-    accelerating = (np.sqrt(v0**2 + 2.0 * accel * np.minimum(d, d_acc)) - v0) / accel
-    return np.where(d <= d_acc, accelerating, (cap - v0) / accel + (d - d_acc) / cap)
-
-
-def occupancy(
-    mixture: Mixture, points: np.ndarray, reach: float, dt: float, threshold: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """``(first, last)``, each ``(J,)``: the first and the last time [s] any mode of ``mixture`` of
-    weight at least ``threshold`` has its truncation box within ``reach`` [m] of each of ``points
-    (J, 2)`` (never: ``inf`` and ``-inf``; still within at the prediction's end: ``last`` inf)."""
-    first, last = np.full(len(points), math.inf), np.full(len(points), -math.inf)
-    for mode in mixture.above(threshold):
-        b = mode.beliefs.as_array()  # (N+1, 12)
-        n = len(b)
-        tau = np.linspace(0.0, (n - 1) * dt, (n - 1) * SUBSTEPS + 1)
-        grid = np.arange(n) * dt
-        x, y = np.interp(tau, grid, b[:, 0]), np.interp(tau, grid, b[:, 1])
-        hx, hy = np.interp(tau, grid, b[:, 7]), np.interp(tau, grid, b[:, 8])
-        frame = np.interp(tau, grid, np.unwrap(b[:, 11]))
-        dx, dy = to_frame(points[None, :, 0] - x[:, None], points[None, :, 1] - y[:, None], frame[:, None])
-        near = signed_box_distance(dx, dy, hx[:, None], hy[:, None]) < reach  # (T, J)
-        seen = near.any(axis=0)
-        first = np.minimum(first, np.where(seen, tau[np.argmax(near, axis=0)], math.inf))
-        ends = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])
-        last = np.maximum(last, np.where(seen, ends, -math.inf))
-    return first, last
 
 
 @dataclass
@@ -178,6 +149,8 @@ class JunctionGate:
         margin: float = GATE_MARGIN,
         threshold: float = GATE_THRESHOLD,
         given_ego: bool = False,
+        judge: str = "boxes",
+        tolerance: float = 0.0,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -190,6 +163,12 @@ class JunctionGate:
         self.reach, self.accel, self.speed_cap = float(reach), float(accel), math.inf
         self.half_length, self.dt = float(half_length), float(dt)
         self.margin, self.threshold = float(margin), float(threshold)
+        self.judge = checks.text("judge", judge, JUDGES)
+        """How a mode is judged (:mod:`~risk_env.highway.gate_judge`)."""
+        if not (isinstance(tolerance, (int, float)) and 0.0 <= tolerance < 1.0):
+            raise GateError(f"tolerance must lie in [0, 1), got {tolerance!r}")
+        self.tolerance = float(tolerance)
+        """The chance of a conflict the gate accepts (0: none, every counted mode)."""
         self.given_ego = bool(given_ego)
         """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.clearance = min(self.reach, GATE_CLEARANCE)
@@ -217,9 +196,12 @@ class JunctionGate:
         self._progress = self._held = -math.inf
         self.last = GateDecision(False, self.span is None)
 
-    def decide(self, progress: float, speed: float, others: np.ndarray) -> GateDecision:
+    def decide(
+        self, progress: float, speed: float, others: np.ndarray, signals: list | None = None
+    ) -> GateDecision:
         """The verdict for the ego at route arc length ``progress`` [m] and ``speed`` [m/s], the
-        other vehicles measured as ``others (m, 5)``."""
+        other vehicles measured as ``others (m, 5)``, with their observed turn signals (``signals``,
+        one ``(2,)`` or None each, for the lane predictor) if any."""
         if self.span is None or self.committed:
             self.last = GateDecision(False, True)
             return self.last
@@ -241,32 +223,44 @@ class JunctionGate:
         ego_in = travel_time(s - self.clearance - progress, speed, self.accel, self.speed_cap)
         ego_out = travel_time(s + self.clearance - progress, speed, self.accel, self.speed_cap)
         steps = min(GATE_STEPS, math.ceil((float(ego_out.max()) + self.margin) / self.dt))
-        slack = math.inf
-        for mixture in self._predict(np.asarray(others, dtype=float), steps):
-            first, last = occupancy(mixture, points, self.clearance, self.dt, self.threshold)
-            # apart: it comes after the ego has cleared the point, or has left before the ego comes
-            slack = min(slack, float(np.min(np.maximum(first - ego_out, ego_in - last))))
-        closed = slack < self.margin
+        slack, masses = math.inf, []
+        for mixture in self._predict(np.asarray(others, dtype=float), steps, signals):
+            mass = 0.0
+            for mode in mixture.above(self.threshold):
+                first, last = occupancy(judged(mode, self.judge), points, self.clearance, self.dt, 0.0)
+                # apart: it comes after the ego has cleared the point, or has left before the ego comes
+                apart = float(np.min(np.maximum(first - ego_out, ego_in - last)))
+                slack = min(slack, apart)
+                mass += mode.weight * (apart < self.margin)
+            masses.append(mass)
+        chance = conflict_chance(masses)
+        closed = slack < self.margin if self.tolerance == 0.0 else chance > self.tolerance
         self.closed_steps += closed
         self.last = GateDecision(closed, False, slack)
         return self.last
 
-    def _predict(self, others: np.ndarray, steps: int) -> list[Mixture]:
+    def _predict(self, others: np.ndarray, steps: int, signals: list | None = None) -> list[Mixture]:
         """The others' mixtures: given that the ego goes now (its route, ``accel`` up to
         :attr:`speed_cap`), where the predictor can condition on the ego (the lane predictor with the
         interval prediction and an ego, :class:`~risk_env.highway.lanes.predictor.EgoPlan`), so that
         traffic that would follow the ego into its exit brakes behind it, as highway-env's does."""
-        if self.given_ego and isinstance(self.predictor, LanePredictor) and self.predictor.ego is not None:
+        if not isinstance(self.predictor, LanePredictor):
+            return self.predictor.predict_scene(others, steps)
+        plan = None
+        if self.given_ego and self.predictor.ego is not None:
             plan = EgoPlan(tuple(self.route.lanes), self.accel, self.speed_cap)
-            return self.predictor.predict_scene(others, steps, ego_plan=plan)
-        return self.predictor.predict_scene(others, steps)
+        return self.predictor.predict_scene(others, steps, signals=signals, ego_plan=plan)
 
-    def step(self, progress: float, speed: float, others: np.ndarray) -> np.ndarray:
+    def step(
+        self, progress: float, speed: float, others: np.ndarray, signals: list | None = None
+    ) -> np.ndarray:
         """:meth:`decide`, and the objects the MPC gets from the gate ``(0 or 1, 5)``: the virtual
-        object when closed; the agents' :class:`GatePredictor` (:attr:`wrapper`) is told which."""
-        virtual = self.virtual() if self.decide(progress, speed, others).closed else None
+        object when closed; the agents' :class:`GatePredictor` (:attr:`wrapper`) is told which, and
+        the observed turn signals ``signals`` of ``others`` (or None)."""
+        virtual = self.virtual() if self.decide(progress, speed, others, signals).closed else None
         if self.wrapper is not None:
             self.wrapper.virtual = virtual
+            self.wrapper.signals = None if signals is None else (np.asarray(others, dtype=float), signals)
         return np.zeros((0, 5)) if virtual is None else virtual[None]
 
     def _line(self) -> float:
@@ -301,20 +295,25 @@ class JunctionGate:
 
 
 def make_gate(
-    on: bool, predictor: Predictor | None, scenario: Scenario, env: Any
+    on: bool | GateSettings, predictor: Predictor | None, scenario: Scenario, env: Any
 ) -> tuple[JunctionGate | None, Predictor | None]:
     """``(gate, the agents' predictor)`` for the adapter: off (``on`` False): ``(None, predictor)``;
-    on: the gate judging with ``predictor`` (the paper's for None), the ego's numbers from
-    ``scenario`` and the env's controlled vehicle, and ``predictor`` wrapped in
-    :class:`GatePredictor` (None stays None: the paper's prediction keeps the virtual object
-    standing, v = 0 and omega = 0, with its spread growing)."""
-    if not check_gate(on):
+    on (True, or its :class:`~risk_env.highway.gate_judge.GateSettings`): the gate judging with
+    ``predictor`` (the paper's for None), the ego's numbers from ``scenario`` and the env's
+    controlled vehicle, and ``predictor`` wrapped in :class:`GatePredictor` (None stays None: the
+    paper's prediction keeps the virtual object standing, v = 0 and omega = 0, with its spread
+    growing)."""
+    settings = check_gate(on)
+    if settings is None:
         return None, predictor
     judge = ConstantPredictor(scenario) if predictor is None else predictor
     ego = scenario.ego
     reach = ego.radius + scenario.objects[0].radius
     length = float(unwrapped_highway(env).vehicle.LENGTH)
-    gate = JunctionGate(judge, reach, ego.accel_max, 0.5 * length, scenario.dt)
+    options = dataclasses.asdict(settings)
+    clearance = options.pop("clearance")
+    gate = JunctionGate(judge, reach, ego.accel_max, 0.5 * length, scenario.dt, **options)
+    gate.clearance = min(gate.reach, checks.positive("GateSettings.clearance", clearance))
     gate.wrapper = None if predictor is None else GatePredictor(predictor)
     return gate, gate.wrapper
 
@@ -355,6 +354,9 @@ class GatePredictor(Predictor):
         self.max_modes = inner.max_modes
         self.virtual: np.ndarray | None = None
         """The virtual object's measurement this step, or None (the gate is open)."""
+        self.signals: tuple[np.ndarray, list] | None = None
+        """This step's observed road users ``(m, 5)`` and their turn signals (one ``(2,)`` or None
+        each), or None: passed on to a lane predictor for the rows it is asked about."""
 
     def predict(self, measurement: Any, steps: int) -> Mixture:
         return self.predict_scene(np.asarray(measurement, dtype=float)[None], steps)[0]
@@ -362,8 +364,21 @@ class GatePredictor(Predictor):
     def predict_scene(self, measurements: Any, steps: int) -> list[Mixture]:
         rows = np.asarray(measurements, dtype=float).reshape(-1, 5)
         virtual = is_virtual(rows, self.virtual)
-        real = iter(self.inner.predict_scene(rows[~virtual], steps) if (~virtual).any() else [])
+        real = iter(self._inner(rows[~virtual], steps) if (~virtual).any() else [])
         return [standing(row, steps) if v else next(real) for row, v in zip(rows, virtual, strict=True)]
+
+    def _inner(self, rows: np.ndarray, steps: int) -> list[Mixture]:
+        """``inner``'s mixtures of ``rows``, with each row's turn signal when it is one of this step's
+        observed road users (within :data:`SIGNAL_MATCH`) and ``inner`` is a lane predictor."""
+        if self.signals is None or not isinstance(self.inner, LanePredictor):
+            return self.inner.predict_scene(rows, steps)
+        seen, signals = self.signals
+        gap = np.hypot(rows[:, None, 0] - seen[None, :, 0], rows[:, None, 1] - seen[None, :, 1])
+        nearest = np.argmin(gap, axis=1) if len(seen) else np.zeros(len(rows), dtype=int)
+        mine = [
+            signals[k] if len(seen) and gap[i, k] <= SIGNAL_MATCH else None for i, k in enumerate(nearest)
+        ]
+        return self.inner.predict_scene(rows, steps, signals=mine)
 
     def __repr__(self) -> str:
         return f"GatePredictor({self.inner!r})"

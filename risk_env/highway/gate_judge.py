@@ -1,0 +1,113 @@
+r"""How the junction gate judges a vehicle's prediction (:class:`~risk_env.highway.gate.JunctionGate`'s
+``judge`` and ``tolerance``).
+
+- ``"boxes"`` (the default): every mode of weight at least the gate's threshold occupies a point of
+  the ego's path while its truncation box is within the clearance of it (the worst case over the
+  mode).
+- ``"footprint"``: each mode occupies the points its mean car covers: a rectangle of highway-env's
+  car (:data:`CAR_HALF_LENGTH` by :data:`CAR_HALF_WIDTH`, turned by the mode's mean heading) about
+  its mean, so that a mode stands for where the vehicle is most likely, not for all it could do.
+
+A mode conflicts when it occupies a point while the ego would be there, with the gate's margin to
+spare. With ``tolerance`` 0 the gate closes when any counted mode of any vehicle conflicts; above
+0, when the chance of a conflict, $1 - \prod_v (1 - \sum_{m \text{ of } v \text{ conflicting}} w_m)$
+(vehicles independent), exceeds it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from risk_env.models.frame import to_frame
+from risk_env.prediction.mixture import Mixture, Mode
+from risk_env.risk.disc import signed_box_distance
+
+SUBSTEPS = 4
+"""Time samples per prediction step (positions linear in between)."""
+JUDGES = ("boxes", "footprint")
+"""The gate's ways of judging a mode (module docstring)."""
+
+
+@dataclass(frozen=True)
+class GateSettings:
+    """How the junction gate judges (``IntersectionAdapter(gate=GateSettings(...))``; ``gate=True``
+    takes these defaults, the gate's own)."""
+
+    clearance: float = 3.0
+    """Distance [m] from the ego's path within which a vehicle is in conflict (at most the discs'
+    summed radii; the gate's ``GATE_CLEARANCE``)."""
+    margin: float = 0.5
+    """Time [s] the ego must have cleared a point before another vehicle reaches it."""
+    threshold: float = 0.05
+    """Weight of a mode from which the gate reckons with it."""
+    judge: str = "boxes"
+    """How a mode occupies the ego's path: :data:`JUDGES`."""
+    tolerance: float = 0.0
+    """The chance of a conflict the gate accepts (0: none)."""
+    given_ego: bool = False
+    """Whether the others are predicted given that the ego goes (the lane predictor with an ego)."""
+
+
+CAR_HALF_LENGTH = 2.5
+"""Half of highway-env's ``Vehicle.LENGTH`` [m]."""
+CAR_HALF_WIDTH = 1.0
+"""Half of highway-env's ``Vehicle.WIDTH`` [m]."""
+
+
+def judged(mode: Mode, judge: str) -> Mixture:
+    """``mode`` alone, weight 1, as ``judge`` sees it: its truncation boxes, or its mean car."""
+    mode = dataclasses.replace(mode, weight=1.0, share=1.0)
+    if judge == "footprint":
+        b = mode.beliefs
+        car = dataclasses.replace(
+            b,
+            half_x=np.full_like(b.half_x, CAR_HALF_LENGTH),
+            half_y=np.full_like(b.half_y, CAR_HALF_WIDTH),
+            frame=np.asarray(b.theta, dtype=float),
+        )
+        mode = dataclasses.replace(mode, beliefs=car)
+    return Mixture((mode,))
+
+
+def conflict_chance(masses: list[float]) -> float:
+    r"""$1 - \prod_v (1 - m_v)$ of the vehicles' conflicting masses ``masses`` (each clipped to [0, 1])."""
+    safe = math.prod(1.0 - min(max(m, 0.0), 1.0) for m in masses)
+    return 1.0 - safe
+
+
+def travel_time(distance: np.ndarray, speed: float, accel: float, cap: float) -> np.ndarray:
+    """Time [s] to cover ``distance`` [m] (``(J,)``, <= 0: 0) from ``speed`` [m/s] accelerating at
+    ``accel`` [m/s^2] up to ``cap`` [m/s]."""
+    d = np.maximum(np.asarray(distance, dtype=float), 0.0)
+    v0 = min(max(float(speed), 0.0), cap)
+    d_acc = (cap**2 - v0**2) / (2.0 * accel)
+    accelerating = (np.sqrt(v0**2 + 2.0 * accel * np.minimum(d, d_acc)) - v0) / accel
+    return np.where(d <= d_acc, accelerating, (cap - v0) / accel + (d - d_acc) / cap)
+
+
+def occupancy(
+    mixture: Mixture, points: np.ndarray, reach: float, dt: float, threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, last)``, each ``(J,)``: the first and the last time [s] any mode of ``mixture`` of
+    weight at least ``threshold`` has its truncation box within ``reach`` [m] of each of ``points
+    (J, 2)`` (never: ``inf`` and ``-inf``; still within at the prediction's end: ``last`` inf)."""
+    first, last = np.full(len(points), math.inf), np.full(len(points), -math.inf)
+    for mode in mixture.above(threshold):
+        b = mode.beliefs.as_array()  # (N+1, 12)
+        n = len(b)
+        tau = np.linspace(0.0, (n - 1) * dt, (n - 1) * SUBSTEPS + 1)
+        grid = np.arange(n) * dt
+        x, y = np.interp(tau, grid, b[:, 0]), np.interp(tau, grid, b[:, 1])
+        hx, hy = np.interp(tau, grid, b[:, 7]), np.interp(tau, grid, b[:, 8])
+        frame = np.interp(tau, grid, np.unwrap(b[:, 11]))
+        dx, dy = to_frame(points[None, :, 0] - x[:, None], points[None, :, 1] - y[:, None], frame[:, None])
+        near = signed_box_distance(dx, dy, hx[:, None], hy[:, None]) < reach  # (T, J)
+        seen = near.any(axis=0)
+        first = np.minimum(first, np.where(seen, tau[np.argmax(near, axis=0)], math.inf))
+        ends = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])
+        last = np.maximum(last, np.where(seen, ends, -math.inf))
+    return first, last

@@ -1,0 +1,140 @@
+"""The junction gate's judge (risk_env.highway.gate_judge): a mode's mean car instead of its boxes,
+a chance of conflict summed over each vehicle's modes, the settings the adapter passes, and the
+turn signals the adapter reads from highway-env's observation and hands on."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from risk_env.highway.gate import GateError, GatePredictor, JunctionGate, check_gate
+from risk_env.highway.gate_judge import CAR_HALF_LENGTH, GateSettings, conflict_chance, judged
+from risk_env.prediction.mixture import Mixture, Mode
+from risk_env.prediction.predictors import Predictor
+from risk_env.scenario.scenario import Scenario
+from tests.test_gate import DT, ROUTE, Crossing, crossing_at
+
+
+class TwoWays(Predictor):
+    """Each road user either crosses the route (weight ``w``) or turns away from it along -y."""
+
+    name = "two ways"
+    max_modes = 2
+
+    def __init__(self, w: float) -> None:
+        self.w = w
+
+    def predict(self, measurement, steps):
+        crossing = Crossing().predict(measurement, steps).modes[0].beliefs
+        away = dataclasses.replace(crossing, y=2 * float(measurement[1]) - crossing.y, theta=-crossing.theta)
+        return Mixture((Mode(self.w, crossing, "crosses"), Mode(1 - self.w, away, "turns away")))
+
+
+def gate(predictor, **options) -> JunctionGate:
+    g = JunctionGate(predictor, reach=4.0, accel=3.0, half_length=2.5, dt=DT, **options)
+    g.reset(ROUTE, Scenario.preset("low", v_ref=8.0, v_max=10.0, v_min=0.0))
+    return g
+
+
+def test_a_mode_judged_by_its_mean_car_is_the_car_about_its_mean():
+    belief = Crossing(growth=30.0).predict(crossing_at(60.0, -20.0, 10.0)[0], 4).modes[0].beliefs
+    mode = Mode(0.3, belief, "m")
+    boxes, car = judged(mode, "boxes").modes[0], judged(mode, "footprint").modes[0]
+    assert boxes.weight == car.weight == 1.0
+    assert np.array_equal(boxes.beliefs.half_x, belief.half_x)
+    assert np.all(car.beliefs.half_x == CAR_HALF_LENGTH) and np.allclose(car.beliefs.frame, math.pi / 2)
+    assert np.array_equal(car.beliefs.x, belief.x) and np.array_equal(car.beliefs.y, belief.y)
+
+
+def test_boxes_that_grow_close_the_gate_where_the_mean_car_leaves_it_open():
+    # its bound growing 30 m/s ahead of it reaches the zone in time, its mean car does not
+    far = crossing_at(60.0, -80.0, 10.0)
+    assert gate(Crossing(growth=30.0)).decide(30.0, 5.0, far).closed
+    assert not gate(Crossing(growth=30.0), judge="footprint").decide(30.0, 5.0, far).closed
+    near = crossing_at(60.0, -30.0, 10.0)  # its mean car is in the zone while the ego is
+    assert gate(Crossing(), judge="footprint").decide(30.0, 5.0, near).closed
+
+
+def test_the_chance_of_a_conflict_sums_each_vehicles_conflicting_modes():
+    assert conflict_chance([]) == 0.0
+    assert conflict_chance([0.2, 0.5]) == pytest.approx(1 - 0.8 * 0.5)
+    near = crossing_at(60.0, -30.0, 10.0)
+    # one vehicle crossing with weight 0.3: closed at any conflict, open when 0.3 is tolerated
+    assert gate(TwoWays(0.3)).decide(30.0, 5.0, near).closed
+    assert gate(TwoWays(0.3), tolerance=0.25).decide(30.0, 5.0, near).closed
+    assert not gate(TwoWays(0.3), tolerance=0.35).decide(30.0, 5.0, near).closed
+    # two such vehicles: 1 - 0.7^2 = 0.51
+    two = np.vstack([near, crossing_at(62.0, -30.0, 10.0)])
+    assert gate(TwoWays(0.3), tolerance=0.5).decide(30.0, 5.0, two).closed
+    assert not gate(TwoWays(0.3), tolerance=0.52).decide(30.0, 5.0, two).closed
+
+
+def test_the_settings_reach_the_gate_and_bad_ones_are_named():
+    assert check_gate(True) == GateSettings() and check_gate(False) is None
+    mine = GateSettings(clearance=2.0, judge="footprint", tolerance=0.1, given_ego=True)
+    assert check_gate(mine) is mine
+    with pytest.raises(GateError, match="gate must be True, False"):
+        check_gate("footprint")
+    with pytest.raises(ValueError, match="judge"):
+        gate(Crossing(), judge="means")
+    with pytest.raises(GateError, match="tolerance must lie in"):
+        gate(Crossing(), tolerance=1.0)
+
+
+class Recorder(Predictor):
+    """Records the signals a lane-predictor-like inner predictor is given."""
+
+    name = "recorder"
+    max_modes = 1
+
+    def __init__(self) -> None:
+        self.seen = []
+
+    def predict(self, measurement, steps):
+        return Crossing().predict(measurement, steps)
+
+
+def test_the_agents_predictor_gets_each_rows_observed_turn_signal(monkeypatch):
+    from risk_env.highway import gate as gate_module
+
+    inner = Recorder()
+
+    def predict_scene(rows, steps, signals=None):
+        inner.seen.append(signals)
+        return [inner.predict(row, steps) for row in rows]
+
+    inner.predict_scene = predict_scene
+    monkeypatch.setattr(gate_module, "LanePredictor", Recorder)  # it reads signals as a lane predictor
+    wrapper = GatePredictor(inner)
+    others = np.array([[10.0, 0.0, 0.0, 5.0, 0.0], [20.0, 3.0, 0.0, 5.0, 0.0]])
+    wrapper.signals = (others, [np.array([0.0, 1.0]), None])
+    asked = np.vstack([others[1], others[0] + 0.01, [90.0, 90.0, 0.0, 1.0, 0.0]])  # float32 rounding
+    wrapper.predict_scene(asked, 3)
+    got = inner.seen[-1]
+    assert got[0] is None and np.array_equal(got[1], [0.0, 1.0]) and got[2] is None
+    wrapper.signals = None
+    wrapper.predict_scene(asked, 3)
+    assert inner.seen[-1] is None
+
+
+def test_the_adapter_reads_turn_signals_only_from_an_env_that_observes_them():
+    pytest.importorskip("highway_env")
+    from risk_env.highway import make_intersection_env
+    from risk_env.highway.common import SIGNAL_FEATURES, turn_signals
+
+    plain = make_intersection_env()
+    obs, _ = plain.reset(seed=0)
+    assert turn_signals(plain.unwrapped, obs) is None
+    env = make_intersection_env(signals=True)
+    obs, _ = env.reset(seed=0)
+    assert list(env.unwrapped.observation_type.features[-2:]) == list(SIGNAL_FEATURES)
+    signals = turn_signals(env.unwrapped, obs)
+    others = [
+        v for v in env.unwrapped.road.close_vehicles_to(env.unwrapped.vehicle, 1e9, count=14, see_behind=True)
+    ]
+    assert len(signals) == int((obs[:, 0] > 0.5).sum()) - 1
+    for shown, vehicle in zip(signals, others, strict=False):  # sorted by distance, as the observation
+        assert np.allclose(shown, vehicle.destination_direction, atol=1e-6)
