@@ -29,6 +29,12 @@ def test_a_short_run_judges_the_steps_at_the_line_and_tables_them(tmp_path, monk
     free, opened = sum(r["free"] for r in rows), sum(r["open"] for r in rows)
     assert f"| {len(rows)} | {free} (" in text and f"| {opened} (" in text
     assert "interval switches: split_yield" in text and "given that the ego goes" in text
+    # the mean car with turn signals read, a chance tolerated: the same steps judged, the same futures
+    loose = ["--signals", "--judge", "footprint", "--tolerance", "0.1", "--out", str(tmp_path / "loose")]
+    looser = highway_gate.main([*argv, "--given-ego", "--clearance", "2", *loose])
+    assert [r["step"] for r in looser] == steps and [r["free"] for r in looser] == [r["free"] for r in rows]
+    text = (tmp_path / "loose" / "gate.md").read_text()
+    assert "turn signals read" in text and "mean car" in text and "above a conflict chance of 0.1" in text
 
 
 def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
@@ -38,3 +44,6 @@ def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
     with pytest.raises(SystemExit):
         highway_gate.main(["--interval", "bogus", "--out", str(tmp_path)])
     assert "unknown interval switch 'bogus'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        highway_gate.main(["--predictor", "constant", "--signals", "--out", str(tmp_path)])
+    assert "--signals needs a lane predictor" in capsys.readouterr().err
