@@ -33,6 +33,9 @@ KINDS = ("rmpc", "smpc", "idm", "hindsight")
 ADAPTER_CORRIDOR = 1.0
 """The adapter's corridor [m] (:data:`risk_env.highway.adapter.ADAPTER_DEFAULTS`) when the options
 name none."""
+ADAPTER_OBJECT_RADIUS = 2.0
+"""The adapter's object disc radius [m] (:data:`risk_env.highway.adapter.ADAPTER_DEFAULTS`) when the
+options name none."""
 DEFAULT_BUDGET = 0.05
 """B of the plain ``smpc`` [the severity's unit per episode]: a 5 % chance of a collision per
 episode in the probability severity."""
@@ -180,6 +183,7 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         predictor=predictor,
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
         gate=gate_settings(args),
+        object_radius=getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS),
     )
 
 

@@ -147,6 +147,13 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         " (inf: none, the ego may leave its lane)",
     )
     parser.add_argument(
+        "--object-radius",
+        type=cli.positive_float,
+        default=ADAPTER_DEFAULTS["object_radius"],
+        help="radius [m] of the other vehicles' discs in the MPCs' rows (the score keeps 2 m): two 2 m"
+        " discs make a car passing in the lane beside, 4 m away, a collision",
+    )
+    parser.add_argument(
         "--lane-pieces",
         type=cli.positive_int,
         default=1,

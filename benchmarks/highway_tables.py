@@ -131,6 +131,7 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f"{'' if getattr(args, 'lane_pieces', 1) == 1 else f', lane predictor in {args.lane_pieces} pieces'}"
         f"{', interval switches on: ' + ', '.join(args.interval) if getattr(args, 'interval', ()) else ''}"
         f"{', turn signals observed' if getattr(args, 'signals', False) else ''}"
+        f"{radius_text(args)}"
         f"{gate_text(args)}"
         "; the MPCs plan with the"
         f" predictor in brackets. Risk scored by RiskCostWrapper (exact, severity {args.severity},"
@@ -213,3 +214,11 @@ def gate_text(args: Any) -> str:
         return ""
     changed = {k: v for k, v in vars(settings).items() if v != getattr(GateSettings(), k)}
     return ", gate " + ", ".join(f"{k} {v}" for k, v in changed.items())
+
+
+def radius_text(args: Any) -> str:
+    """The MPCs' object disc radius where the options change it (for the table's header), else ""."""
+    from benchmarks.highway_agents import ADAPTER_OBJECT_RADIUS
+
+    radius = getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS)
+    return "" if radius == ADAPTER_OBJECT_RADIUS else f", the MPCs' object discs {radius:g} m"

@@ -12,6 +12,7 @@ import pytest
 
 from risk_env.highway.gate import GateError, GatePredictor, JunctionGate, check_gate
 from risk_env.highway.gate_judge import CAR_HALF_LENGTH, GateSettings, conflict_chance, judged
+from risk_env.highway.lanes.predictor import EgoPlan
 from risk_env.prediction.mixture import Mixture, Mode
 from risk_env.prediction.predictors import Predictor
 from risk_env.scenario.scenario import Scenario
@@ -102,9 +103,12 @@ def test_the_agents_predictor_gets_each_rows_observed_turn_signal(monkeypatch):
 
     inner = Recorder()
 
-    def predict_scene(rows, steps, signals=None):
+    def predict_scene(rows, steps, signals=None, ego_plan=None):
         inner.seen.append(signals)
+        inner.plans.append(ego_plan)
         return [inner.predict(row, steps) for row in rows]
+
+    inner.plans = []
 
     inner.predict_scene = predict_scene
     monkeypatch.setattr(gate_module, "LanePredictor", Recorder)  # it reads signals as a lane predictor
@@ -117,7 +121,26 @@ def test_the_agents_predictor_gets_each_rows_observed_turn_signal(monkeypatch):
     assert got[0] is None and np.array_equal(got[1], [0.0, 1.0]) and got[2] is None
     wrapper.signals = None
     wrapper.predict_scene(asked, 3)
-    assert inner.seen[-1] is None
+    assert inner.seen[-1] is None and inner.plans == [None, None]
+    plan = EgoPlan((("o0", "ir0", 0),), 3.0, 8.0)  # the gate's, while it is open with given_ego
+    wrapper.ego_plan = plan
+    wrapper.predict_scene(asked, 3)
+    assert inner.plans[-1] is plan
+
+
+def test_an_open_gate_given_the_ego_tells_the_agents_predictor_that_the_ego_goes():
+    wrapper = GatePredictor(Crossing())
+    for given, others, going in (
+        (True, crossing_at(60.0, -300.0, 10.0), True),  # open: the ego goes
+        (True, crossing_at(60.0, -30.0, 10.0), False),  # closed: it waits
+        (False, crossing_at(60.0, -300.0, 10.0), False),  # not asked to
+    ):
+        g = gate(Crossing(), given_ego=given)
+        g.wrapper = wrapper
+        g.step(30.0, 5.0, others)
+        assert (wrapper.ego_plan is not None) is going
+        if going:
+            assert wrapper.ego_plan == EgoPlan(ROUTE.lanes, 3.0, 8.0)
 
 
 def test_the_adapter_reads_turn_signals_only_from_an_env_that_observes_them():
@@ -138,3 +161,26 @@ def test_the_adapter_reads_turn_signals_only_from_an_env_that_observes_them():
     assert len(signals) == int((obs[:, 0] > 0.5).sum()) - 1
     for shown, vehicle in zip(signals, others, strict=False):  # sorted by distance, as the observation
         assert np.allclose(shown, vehicle.destination_direction, atol=1e-6)
+
+
+def test_the_commands_defaults_are_the_adapters():
+    pytest.importorskip("highway_env")
+    from benchmarks import highway_intersection
+    from benchmarks.highway_agents import ADAPTER_CORRIDOR, ADAPTER_OBJECT_RADIUS, gate_settings
+    from risk_env.highway.adapter import ADAPTER_DEFAULTS
+
+    assert ADAPTER_DEFAULTS["corridor"] == ADAPTER_CORRIDOR
+    assert ADAPTER_DEFAULTS["object_radius"] == ADAPTER_OBJECT_RADIUS
+    args = highway_intersection.parse_args([])
+    assert gate_settings(args) == GateSettings() and args.object_radius == ADAPTER_OBJECT_RADIUS
+    args = highway_intersection.parse_args(
+        ["--gate-judge", "footprint", "--gate-tolerance", "0.1", "--gate-given-ego"]
+    )
+    assert gate_settings(args) == GateSettings(judge="footprint", tolerance=0.1, given_ego=True)
+    assert gate_settings(highway_intersection.parse_args(["--no-gate"])) is False
+    from benchmarks.highway_agents import make_driver, resolve
+    from risk_env.highway import make_intersection_env
+
+    args = highway_intersection.parse_args(["--object-radius", "1"])
+    driver = make_driver(resolve("rmpc", args.severity, args.budget), make_intersection_env(), args, "lane")
+    assert driver.base_scenario.objects[0].radius == 1.0 and driver.base_scenario.ego.radius == 2.0

@@ -261,6 +261,10 @@ class JunctionGate:
         if self.wrapper is not None:
             self.wrapper.virtual = virtual
             self.wrapper.signals = None if signals is None else (np.asarray(others, dtype=float), signals)
+            going = self.given_ego and virtual is None and self.route is not None
+            self.wrapper.ego_plan = (
+                EgoPlan(tuple(self.route.lanes), self.accel, self.speed_cap) if going else None
+            )
         return np.zeros((0, 5)) if virtual is None else virtual[None]
 
     def _line(self) -> float:
@@ -357,6 +361,9 @@ class GatePredictor(Predictor):
         self.signals: tuple[np.ndarray, list] | None = None
         """This step's observed road users ``(m, 5)`` and their turn signals (one ``(2,)`` or None
         each), or None: passed on to a lane predictor for the rows it is asked about."""
+        self.ego_plan: EgoPlan | None = None
+        """What the ego does this step for a lane predictor's prediction given it (the gate's
+        ``given_ego`` and open: it drives its route), or None (it brakes)."""
 
     def predict(self, measurement: Any, steps: int) -> Mixture:
         return self.predict_scene(np.asarray(measurement, dtype=float)[None], steps)[0]
@@ -368,17 +375,20 @@ class GatePredictor(Predictor):
         return [standing(row, steps) if v else next(real) for row, v in zip(rows, virtual, strict=True)]
 
     def _inner(self, rows: np.ndarray, steps: int) -> list[Mixture]:
-        """``inner``'s mixtures of ``rows``, with each row's turn signal when it is one of this step's
-        observed road users (within :data:`SIGNAL_MATCH`) and ``inner`` is a lane predictor."""
-        if self.signals is None or not isinstance(self.inner, LanePredictor):
+        """``inner``'s mixtures of ``rows``; a lane predictor is also given each row's turn signal
+        when it is one of this step's observed road users (within :data:`SIGNAL_MATCH`), and
+        :attr:`ego_plan`."""
+        if not isinstance(self.inner, LanePredictor):
             return self.inner.predict_scene(rows, steps)
+        if self.signals is None:
+            return self.inner.predict_scene(rows, steps, ego_plan=self.ego_plan)
         seen, signals = self.signals
         gap = np.hypot(rows[:, None, 0] - seen[None, :, 0], rows[:, None, 1] - seen[None, :, 1])
         nearest = np.argmin(gap, axis=1) if len(seen) else np.zeros(len(rows), dtype=int)
         mine = [
             signals[k] if len(seen) and gap[i, k] <= SIGNAL_MATCH else None for i, k in enumerate(nearest)
         ]
-        return self.inner.predict_scene(rows, steps, signals=mine)
+        return self.inner.predict_scene(rows, steps, signals=mine, ego_plan=self.ego_plan)
 
     def __repr__(self) -> str:
         return f"GatePredictor({self.inner!r})"

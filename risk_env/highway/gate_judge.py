@@ -49,7 +49,8 @@ class GateSettings:
     tolerance: float = 0.0
     """The chance of a conflict the gate accepts (0: none)."""
     given_ego: bool = False
-    """Whether the others are predicted given that the ego goes (the lane predictor with an ego)."""
+    """Whether the others are predicted given that the ego goes (the lane predictor with an ego):
+    by the gate, and, while it is open, by the agents' predictor too."""
 
 
 CAR_HALF_LENGTH = 2.5
