@@ -13,12 +13,13 @@ junction, each step, whether the ego can cross all of it first:
   :data:`GATE_CLEARANCE` of it, to $t^e_{out,j}$, when its centre is that far past it, driving from
   its speed at its largest acceleration ``accel`` up to ``speed_cap`` (the planner's $v_{ref}$
   there).
-- **Each other vehicle** occupies point $j$ from $t^o_{in,j}$ to $t^o_{out,j}$: the first and the
-  last time one of its predicted modes of weight at least :data:`GATE_THRESHOLD` (their truncation
-  boxes: the interval predictor's fast and slow runs bound the box ahead and behind) is within
-  :data:`GATE_CLEARANCE` of it, over a horizon long enough for the ego to cross (at most
-  :data:`GATE_STEPS` steps), linearly between steps; still there at the horizon's end: for ever.
-- The gate **closes** when some vehicle occupies some point while the ego would be there, with
+- **Each predicted mode** of another vehicle, of weight at least :data:`GATE_THRESHOLD`, occupies
+  point $j$ from $t^o_{in,j}$ to $t^o_{out,j}$: the first and the last time its truncation box (the
+  interval predictor's fast and slow runs bound it ahead and behind; or its mean car,
+  :mod:`~risk_env.highway.gate_judge`) is within :data:`GATE_CLEARANCE` of it, over a horizon long
+  enough for the ego to cross (at most :data:`GATE_STEPS` steps), linearly between steps; still
+  there at the horizon's end: for ever.
+- The gate **closes** when some mode occupies some point while the ego would be there, with
   :data:`GATE_MARGIN` to spare on either side: $\max(t^o_{in,j} - t^e_{out,j}, t^e_{in,j} -
   t^o_{out,j}) <$ margin. (Judged by arrival alone, $t^o_{in,j} < t^e_{out,j}$ + margin, it also
   closed for a vehicle that had passed a point long before the ego would come, a leader on the
