@@ -170,10 +170,7 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
     pieces = getattr(args, "lane_pieces", 1)
     switches = tuple(getattr(args, "interval", ()))
     if predictor in ("lane", "lane+interval") and (pieces > 1 or (switches and predictor == "lane+interval")):
-        from risk_env.highway.predictors import highway_predictor
-
-        intervals = interval_model(switches) if predictor == "lane+interval" else None
-        predictor = highway_predictor(predictor, env, pieces=pieces, intervals=intervals)
+        predictor = built_predictor(predictor, env, pieces, switches)
     return IntersectionAdapter(
         env,
         Builder(functools.partial(RMPC if agent.kind == "rmpc" else SMPC, **options)),
@@ -214,6 +211,15 @@ def add_interval_option(parser: argparse.ArgumentParser) -> None:
         help="comma list of the lane+interval predictor's switches to turn on: split_yield (each mode"
         " held or free, weighted by the yielding rule), centred (each box centred on its interval)",
     )
+
+
+def built_predictor(name: str, env: Any, pieces: int = 1, switches: tuple[str, ...] = ()) -> Any:
+    """The predictor ``name`` for ``env`` (:func:`risk_env.highway.predictors.highway_predictor`),
+    with P = ``pieces`` and, for ``"lane+interval"``, the interval ``switches`` on."""
+    from risk_env.highway.predictors import highway_predictor
+
+    intervals = interval_model(switches) if name == "lane+interval" else None
+    return highway_predictor(name, env, pieces=pieces, intervals=intervals)
 
 
 def interval_model(switches: tuple[str, ...]) -> Any:

@@ -49,26 +49,29 @@ FIELDS = ("seed", "step", "time_s", "free", "open", "slack_s")
 
 def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
     """The judged steps of episode ``seed`` (see the module): one row each."""
-    from benchmarks.highway_agents import interval_model
+    from benchmarks.highway_agents import built_predictor
     from benchmarks.highway_hindsight import outcome, scheduled_vehicle
     from risk_env.highway import highway_scenario, make_intersection_env, vehicle_measurement
     from risk_env.highway.adapter import ADAPTER_DEFAULTS
     from risk_env.highway.gate import make_gate
+    from risk_env.highway.gate_judge import GateSettings
     from risk_env.highway.idm import put_ego
-    from risk_env.highway.predictors import highway_predictor
     from risk_env.highway.route import RoutePath
 
     env = make_intersection_env()
     env.reset(seed=seed)
     base = env.unwrapped
     put_ego(base, scheduled_vehicle(base, math.inf, DESTINATION))
-    intervals = interval_model(args.interval) if args.predictor == "lane+interval" else None
-    predictor = highway_predictor(args.predictor, env, intervals=intervals)
+    predictor = built_predictor(args.predictor, env, switches=args.interval)
     scenario = highway_scenario(env, "low", **ADAPTER_DEFAULTS)  # the adapter's
-    gate, _ = make_gate(True, predictor, scenario, env)
-    gate.margin, gate.given_ego = args.margin, args.given_ego
-    gate.judge, gate.tolerance = args.judge, args.tolerance
-    gate.clearance = min(gate.reach, args.clearance)
+    settings = GateSettings(
+        clearance=args.clearance,
+        margin=args.margin,
+        judge=args.judge,
+        tolerance=args.tolerance,
+        given_ego=args.given_ego,
+    )
+    gate, _ = make_gate(settings, predictor, scenario, env)
     route = RoutePath.of_vehicle(base.road.network, base.vehicle, DESTINATION)
     gate.reset(route, scenario)
     rows: list[dict[str, Any]] = []
@@ -149,10 +152,10 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m benchmarks.highway_gate``."""
-    from risk_env.highway.gate import GATE_CLEARANCE, GATE_MARGIN
-    from risk_env.highway.gate_judge import JUDGES
+    from risk_env.highway.gate_judge import JUDGES, GateSettings
     from risk_env.highway.predictors import HIGHWAY_PREDICTORS
 
+    defaults = GateSettings()
     parser = cli.parser("highway_gate", __doc__)
     parser.add_argument("--episodes", type=cli.positive_int, default=10, help="seeded episodes")
     parser.add_argument("--seed", type=cli.nonnegative_int, default=0, help="first seed")
@@ -164,22 +167,25 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--clearance",
         type=cli.positive_float,
-        default=GATE_CLEARANCE,
+        default=defaults.clearance,
         help="distance [m] from the ego's path within which a box is in conflict (at most the discs' 4 m)",
     )
     parser.add_argument(
-        "--margin", type=cli.nonnegative_float, default=GATE_MARGIN, help="time [s] to spare at each point"
+        "--margin",
+        type=cli.nonnegative_float,
+        default=defaults.margin,
+        help="time [s] to spare at each point",
     )
     parser.add_argument(
         "--judge",
         choices=JUDGES,
-        default="boxes",
+        default=defaults.judge,
         help="a mode occupies what its truncation boxes hold, or its mean car (risk_env.highway.gate_judge)",
     )
     parser.add_argument(
         "--tolerance",
         type=cli.unit_interval,
-        default=0.0,
+        default=defaults.tolerance,
         help="the chance of a conflict the gate accepts (0: none; summed over each vehicle's modes)",
     )
     parser.add_argument(
@@ -190,7 +196,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--given-ego",
         action=argparse.BooleanOptionalAction,
-        default=False,
+        default=defaults.given_ego,
         help="predict the others given that the ego goes (lane+interval only; else with the ego braking)",
     )
     parser.add_argument(

@@ -53,7 +53,17 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import unwrapped_highway
-from risk_env.highway.gate_judge import JUDGES, GateSettings, conflict_chance, judged, occupancy, travel_time
+from risk_env.highway.gate_judge import (
+    GATE_CLEARANCE,
+    GATE_MARGIN,
+    GATE_THRESHOLD,
+    JUDGES,
+    GateSettings,
+    conflict_chance,
+    judged,
+    occupancy,
+    travel_time,
+)
 from risk_env.highway.lane_agents import lane_scenario
 from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
 from risk_env.highway.route import RoutePath
@@ -64,13 +74,6 @@ from risk_env.scenario.scenario import Scenario
 
 JUNCTION_PREFIX = "ir"
 """A route lane from a node named so lies inside highway-env's intersection (``ir*`` -> ``il*``)."""
-GATE_CLEARANCE = 3.0
-"""Distance [m] between centres the gate keeps (at most ``reach``): two 2 m wide cars side by side
-touch at 2 m; the discs' 4 m would make a car leaving in the lane beside the entry a conflict."""
-GATE_MARGIN = 0.5
-"""Time [s] the ego must have cleared a point of the zone before another vehicle reaches it."""
-GATE_THRESHOLD = 0.05
-"""Weight of a vehicle's route hypothesis from which the gate reckons with it."""
 GATE_STEPS = 20
 """Most prediction steps the gate looks ahead (10 s at T = 0.5 s)."""
 GATE_RANGE = 40.0
@@ -247,10 +250,12 @@ class JunctionGate:
         traffic that would follow the ego into its exit brakes behind it, as highway-env's does."""
         if not isinstance(self.predictor, LanePredictor):
             return self.predictor.predict_scene(others, steps)
-        plan = None
-        if self.given_ego and self.predictor.ego is not None:
-            plan = EgoPlan(tuple(self.route.lanes), self.accel, self.speed_cap)
+        plan = self._plan() if self.given_ego and self.predictor.ego is not None else None
         return self.predictor.predict_scene(others, steps, signals=signals, ego_plan=plan)
+
+    def _plan(self) -> EgoPlan:
+        """The ego going now: along its route, at ``accel`` up to :attr:`speed_cap`."""
+        return EgoPlan(tuple(self.route.lanes), self.accel, self.speed_cap)
 
     def step(
         self, progress: float, speed: float, others: np.ndarray, signals: list | None = None
@@ -263,9 +268,7 @@ class JunctionGate:
             self.wrapper.virtual = virtual
             self.wrapper.signals = None if signals is None else (np.asarray(others, dtype=float), signals)
             going = self.given_ego and virtual is None and self.route is not None
-            self.wrapper.ego_plan = (
-                EgoPlan(tuple(self.route.lanes), self.accel, self.speed_cap) if going else None
-            )
+            self.wrapper.ego_plan = self._plan() if going else None
         return np.zeros((0, 5)) if virtual is None else virtual[None]
 
     def _line(self) -> float:

@@ -26,6 +26,13 @@ from risk_env.models.frame import to_frame
 from risk_env.prediction.mixture import Mixture, Mode
 from risk_env.risk.disc import signed_box_distance
 
+GATE_CLEARANCE = 3.0
+"""Distance [m] between centres the gate keeps (at most ``reach``): two 2 m wide cars side by side
+touch at 2 m; the discs' 4 m would make a car leaving in the lane beside the entry a conflict."""
+GATE_MARGIN = 0.5
+"""Time [s] the ego must have cleared a point of the zone before another vehicle reaches it."""
+GATE_THRESHOLD = 0.05
+"""Weight of a vehicle's route hypothesis from which the gate reckons with it."""
 SUBSTEPS = 4
 """Time samples per prediction step (positions linear in between)."""
 JUDGES = ("boxes", "footprint")
@@ -37,12 +44,12 @@ class GateSettings:
     """How the junction gate judges (``IntersectionAdapter(gate=GateSettings(...))``; ``gate=True``
     takes these defaults, the gate's own)."""
 
-    clearance: float = 3.0
+    clearance: float = GATE_CLEARANCE
     """Distance [m] from the ego's path within which a vehicle is in conflict (at most the discs'
-    summed radii; the gate's ``GATE_CLEARANCE``)."""
-    margin: float = 0.5
+    summed radii)."""
+    margin: float = GATE_MARGIN
     """Time [s] the ego must have cleared a point before another vehicle reaches it."""
-    threshold: float = 0.05
+    threshold: float = GATE_THRESHOLD
     """Weight of a mode from which the gate reckons with it."""
     judge: str = "boxes"
     """How a mode occupies the ego's path: :data:`JUDGES`."""

@@ -183,15 +183,14 @@ def interval_bounds(
     going = ego_motion is not None
     fast_ego = ego if (intervals.ego_leads or going) else none
     ego_rule = {"script": ego_motion, "exempt": ego if going else None}
+    fast_options = {"delta": np.full(count, high), "target": np.full(count, np.inf), "scripted": fast_ego}
     fast = lane_model.run(
         agents,
         steps,
         dt,
-        delta=np.full(count, high),
-        target=np.full(count, np.inf),
         yielding=intervals.upper_yields,
         partners=np.flatnonzero(agents.representative),
-        scripted=fast_ego,
+        **fast_options,
         **ego_rule,
     )
     slow_options = {
@@ -212,15 +211,7 @@ def interval_bounds(
     if not held.any():
         return IntervalBounds(union, chance=np.zeros(count))
     held_fast = lane_model.run(
-        agents,
-        steps,
-        dt,
-        delta=np.full(count, high),
-        target=np.full(count, np.inf),
-        yielding=True,
-        partners=everyone,
-        scripted=fast_ego,
-        **ego_rule,
+        agents, steps, dt, yielding=True, partners=everyone, **fast_options, **ego_rule
     )
     waiting = held & (first_yield == 0)
     chance = np.where(first_yield > 0, first_yield, np.where(waiting, first_yield.max(), 0.0))

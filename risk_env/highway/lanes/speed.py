@@ -164,7 +164,7 @@ class SpeedModel:
         and the agents ``scripted`` (``(A,)`` bool) that follow no IDM: at full braking to a stop, or
         with ``script`` ``(a, v)`` accelerating at a [m/s²] up to v [m/s] (the ego, as it plans).
         ``exempt`` ``(A,)`` bool: agents that never yield (highway-env's rule leaves the controlled
-        vehicle alone); nobody yields to them either unless they are partners. ``yields``: an
+        vehicle alone); whether others yield to them is as for anyone (``partners``). ``yields``: an
         ``(A,)`` float array, filled with the probability that each agent yields at the first check
         at which it yields in this run (0 where it never does): one minus the chance, over the road
         users it yields to, that none of them is on a route it yields to (their routes'
