@@ -180,11 +180,32 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         predictor=predictor,
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
         gate=gate_settings(args),
-        object_radius=getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS),
+        **body_overrides(args),
     )
 
 
-INTERVAL_SWITCHES = ("split_yield", "centred")
+def body_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The adapter's scenario overrides for the vehicles' shapes in the MPCs' rows: ``--car-discs``
+    n > 1: the ego and every object as n discs covering highway-env's car
+    (:func:`risk_env.risk.bodies.cover_radius`); else the object's disc of ``--object-radius``."""
+    radius = getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS)
+    discs = getattr(args, "car_discs", 1)
+    if discs == 1:
+        return {"object_radius": radius}
+    if radius != ADAPTER_OBJECT_RADIUS:
+        raise ValueError(
+            f"--object-radius {radius:g} with --car-discs {discs}: the discs' radius covers the car, give one"
+        )
+    from highway_env.vehicle.kinematics import Vehicle
+
+    from risk_env.risk.bodies import cover_radius
+
+    r = cover_radius(Vehicle.LENGTH, Vehicle.WIDTH, discs)
+    body = {"discs": discs, "length": Vehicle.LENGTH, "radius": r}
+    return {f"{who}_{k}": v for who in ("ego", "object") for k, v in body.items()}
+
+
+INTERVAL_SWITCHES = ("split_yield", "centred", "yield_to_ego")
 """The interval prediction's switches a benchmark's ``--interval`` may turn on
 (:class:`~risk_env.highway.lanes.interval.IntervalModel`'s bool fields of these names)."""
 
@@ -209,7 +230,8 @@ def add_interval_option(parser: argparse.ArgumentParser) -> None:
         type=interval_switches,
         default=(),
         help="comma list of the lane+interval predictor's switches to turn on: split_yield (each mode"
-        " held or free, weighted by the yielding rule), centred (each box centred on its interval)",
+        " held or free, weighted by the yielding rule), centred (each box centred on its interval),"
+        " yield_to_ego (no box runs through a standing ego from one that follows it or yields to it)",
     )
 
 

@@ -154,6 +154,13 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         " discs make a car passing in the lane beside, 4 m away, a collision",
     )
     parser.add_argument(
+        "--car-discs",
+        type=cli.positive_int,
+        default=1,
+        help="n: the MPCs see the ego and every vehicle as n discs along its length covering highway-env's"
+        " 5 x 2 m car (radius sqrt((5/2n)^2 + 1); 1: one disc of --object-radius, the ego's 2 m)",
+    )
+    parser.add_argument(
         "--lane-pieces",
         type=cli.positive_int,
         default=1,

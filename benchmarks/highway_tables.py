@@ -221,4 +221,7 @@ def radius_text(args: Any) -> str:
     from benchmarks.highway_agents import ADAPTER_OBJECT_RADIUS
 
     radius = getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS)
+    discs = getattr(args, "car_discs", 1)
+    if discs > 1:
+        return f", the MPCs' cars {discs} discs each"
     return "" if radius == ADAPTER_OBJECT_RADIUS else f", the MPCs' object discs {radius:g} m"

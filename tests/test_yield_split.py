@@ -163,6 +163,31 @@ def test_given_that_the_ego_goes_a_follower_drives_on_behind_it():
         EgoPlan((), 3.0, 8.0)
 
 
+def test_with_yield_to_ego_no_box_runs_through_a_standing_ego():
+    """A road user stopped behind a standing ego: its box runs through the ego's rear within the
+    horizon (the mean run has the ego drive off as highway-env's IDM; given that it goes, every
+    run), so a plan to stand has no solution; with ``yield_to_ego`` every box ends where a run
+    with the ego standing stops it, behind the ego."""
+    road = RoadNetwork.straight_road_network(lanes=1, length=1000.0, speed_limit=10.0)
+    ego = np.array([104.0, 0.0, 0.0, 0.0, 0.0])
+    follower = np.array([96.0, 0.0, 0.0, 0.0, 0.0])  # stopped behind it, as in a queue
+    ego_rear = 104.0 - 2.5
+    plan = EgoPlan((("0", "1", 0),), 3.0, 8.0)
+
+    def front(switch: bool, given: EgoPlan | None) -> float:
+        intervals = IntervalModel(centred=True, split_yield=True, yield_to_ego=switch)
+        predictor = LanePredictor(road, T, longitudinal="interval", intervals=intervals, ego=lambda: ego)
+        beliefs = predictor.predict_scene(follower[None], STEPS, ego_plan=given)[0].modes[0].beliefs
+        return max(along(beliefs, n, 0.0)[1] for n in range(STEPS + 1))
+
+    assert front(False, None) > ego_rear + 2.5
+    assert front(False, plan) > ego_rear
+    assert front(True, None) < ego_rear
+    assert front(True, plan) < ego_rear
+    with pytest.raises(TypeError, match="yield_to_ego"):
+        IntervalModel(yield_to_ego=1)
+
+
 def test_the_gate_predicts_the_others_given_that_the_ego_goes(network):
     seen = []
 

@@ -30,7 +30,7 @@ from risk_env import checks
 from risk_env import observation as ob
 from risk_env.prediction.belief import Belief
 from risk_env.prediction.predictors import Predictor, make_predictor
-from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk
+from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk, with_bodies
 from risk_env.scenario.scenario import Scenario
 
 __all__ = ["FEASIBLE_SLACK", "FREE_MARGIN", "SOFT_SHARE", "SOLVERS", "STAGE_COSTS", "PathFollowingMPC"]
@@ -157,10 +157,10 @@ class PathFollowingMPC(RiskForm):
         """$w_{min}$: the RMPC plans against every mode of at least this weight (the SMPC: all)."""
         self._numbers = self._slots.numbers
         scenarios = [self._slots.scenario_of(row) for row in range(self._slots.rows)]
-        self.estimators: tuple[RiskEstimator, ...] = tuple(self._estimator(s) for s in scenarios)
+        self.estimators: tuple[RiskEstimator, ...] = tuple(with_bodies(self._estimator(s)) for s in scenarios)
         """Each planning row's risk estimator (object k's radius, mass and uncertainty; row k M + m)."""
         self.estimator = self.estimators[0]
-        self._worsts = tuple(WorstCaseRisk(s) for s in scenarios)
+        self._worsts = tuple(with_bodies(WorstCaseRisk(s)) for s in scenarios)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
         self.settings = SolverSettings(
             solver=solver,

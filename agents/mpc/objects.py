@@ -23,6 +23,7 @@ import numpy as np
 
 from agents.mpc.nlp.parameters import given_vector, slot_numbers
 from risk_env.prediction.belief import Belief
+from risk_env.risk.bodies import BodyRisk
 from risk_env.risk.estimators import RiskEstimator
 from risk_env.risk.severity import InjurySeverity, PaperSeverity, PlasticSeverity
 from risk_env.scenario.scenario import Scenario
@@ -38,7 +39,10 @@ def slot_scenario(scenario: Scenario, slot: int) -> Scenario:
 
 def symbolic(estimator: RiskEstimator, radius: ca.SX, mass: ca.SX) -> RiskEstimator:
     """A copy of ``estimator`` with collision distance ``radius`` [m] and object mass ``mass``
-    [kg] (symbols; the severity's scale stays the estimator's, a number)."""
+    [kg] (symbols; the severity's scale stays the estimator's, a number); bodies of several discs
+    keep their discs."""
+    if isinstance(estimator, BodyRisk):
+        return estimator.rebuilt(symbolic(estimator.inner, radius, mass))
     out = copy.copy(estimator)
     out.radius = radius
     sev, sc = estimator.severity, estimator.scenario

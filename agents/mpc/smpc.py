@@ -17,6 +17,7 @@ from agents.mpc.objects import slot_rows, symbolic
 from risk_env import checks
 from risk_env.models.ops import CASADI
 from risk_env.prediction.belief import Belief
+from risk_env.risk.bodies import BodyRisk
 from risk_env.risk.estimators import ExactRisk, MonteCarloRisk, RiskEstimator
 from risk_env.risk.severity import make_severity
 from risk_env.scenario.scenario import Scenario
@@ -296,7 +297,8 @@ class SMPC(PathFollowingMPC):
                     # soft minimum of the distances to the draws: smooth, and below the minimum by
                     # at most CLEARANCE_SOFTNESS * log(J), so clearance >= 0 keeps the disc off
                     # every draw
-                    dist = est.distances(ego, draws)
+                    bodies = isinstance(est, BodyRisk)
+                    dist = est.distances(ego, draws, belief.theta) if bodies else est.distances(ego, draws)
                     t = CLEARANCE_SOFTNESS
                     nearest = ca.mmin(
                         dist

@@ -335,7 +335,7 @@ class RiskCrossingVectorEnv(VectorEnv):
         terms = np.zeros((self._objects, self.num_envs))
         for i, (estimator, belief) in enumerate(zip(self.estimators, beliefs, strict=True)):
             drawing = self._drawing(i, active)
-            if not isinstance(estimator, MonteCarloRisk):
+            if not isinstance(getattr(estimator, "inner", estimator), MonteCarloRisk):
                 risk = estimator.risk(ego_state, belief)
                 terms[i] = risk if drawing is None else np.where(drawing, risk, 0.0)
                 continue

@@ -316,7 +316,8 @@ def make_gate(
         return None, predictor
     judge = ConstantPredictor(scenario) if predictor is None else predictor
     ego = scenario.ego
-    reach = ego.radius + scenario.objects[0].radius
+    obj = scenario.objects[0]  # the touch distance along the lane, of the bodies' outer discs
+    reach = ego.radius + obj.radius + max(map(abs, ego.disc_offsets)) + max(map(abs, obj.disc_offsets))
     length = float(unwrapped_highway(env).vehicle.LENGTH)
     options = dataclasses.asdict(settings)
     clearance = options.pop("clearance")

@@ -32,6 +32,7 @@ import numpy as np
 from risk_env.models.frame import to_frame
 from risk_env.models.ops import CASADI, MATH, NUMPY
 from risk_env.prediction.belief import Belief
+from risk_env.risk.bodies import with_bodies
 from risk_env.risk.disc import disc_probability as disc_probability
 from risk_env.risk.disc import signed_box_distance, support_halves
 from risk_env.risk.estimator import EgoFloats as EgoFloats
@@ -169,13 +170,14 @@ class ExactRisk(RiskEstimator):
 
 
 def make_estimator(name: str, scenario: Scenario, **kwargs: Any) -> RiskEstimator:
-    """The estimator called ``name`` (one of :data:`ESTIMATOR_NAMES`) for ``scenario``."""
+    """The estimator called ``name`` (one of :data:`ESTIMATOR_NAMES`) for ``scenario``; around it
+    :class:`~risk_env.risk.bodies.BodyRisk` where the ego or the object has several discs."""
     if name == "exact":
-        return ExactRisk(scenario, **kwargs)
+        return with_bodies(ExactRisk(scenario, **kwargs))
     if name == "monte_carlo":
-        return MonteCarloRisk(scenario, **kwargs)
+        return with_bodies(MonteCarloRisk(scenario, **kwargs))
     if name == "worst_case":
-        return WorstCaseRisk(scenario, **kwargs)
+        return with_bodies(WorstCaseRisk(scenario, **kwargs))
     if name == "grid":
-        return WorstCaseRisk(scenario, grid=True, **kwargs)
+        return with_bodies(WorstCaseRisk(scenario, grid=True, **kwargs))
     raise ValueError(f"unknown risk estimator {name!r}; expected one of {ESTIMATOR_NAMES}")

@@ -15,12 +15,14 @@ from typing import Any
 import numpy as np
 
 from risk_env.prediction.belief import Belief
+from risk_env.risk.bodies import BodyRisk
 from risk_env.risk.estimators import RiskEstimator, WorstCaseRisk
 
 
 def is_expectation(estimator: RiskEstimator) -> bool:
     """Whether ``estimator``'s risk is an expectation (weighted over modes), not a worst case."""
-    return not isinstance(estimator, WorstCaseRisk)
+    inner = estimator.inner if isinstance(estimator, BodyRisk) else estimator
+    return not isinstance(inner, WorstCaseRisk)
 
 
 def mixture_risk(

@@ -77,6 +77,11 @@ class Ego:
     """Largest speed change per second [m/s^2] (a rate limit on $v$)."""
     omega_rate_max: float = 1.6
     r"""Largest turn-rate change per second [rad/s^2] (a rate limit on $\omega$)."""
+    discs: int = 1
+    """Collision discs of radius ``radius`` along the heading (1: the paper's single disc)."""
+    length: float = 0.0
+    """Body length [m] the discs cover: their centres lie at the middles of ``discs`` equal pieces
+    of it, centred on the pose (no effect with one disc)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "start", Pose.of(self.start, "ego.start"))
@@ -97,9 +102,31 @@ class Ego:
         checks.positive("ego.omega_max", self.omega_max)
         checks.positive("ego.accel_max", self.accel_max)
         checks.positive("ego.omega_rate_max", self.omega_rate_max)
+        check_body(self, "ego")
         v0, w0 = self.initial_input
         if not (self.v_min <= v0 <= self.v_max and abs(w0) <= self.omega_max):
             raise ValueError(f"ego.initial_input {self.initial_input} lies outside the input limits")
+
+    @property
+    def disc_offsets(self) -> tuple[float, ...]:
+        """Offsets [m] of the disc centres along the heading (:func:`disc_offsets`)."""
+        return disc_offsets(self.discs, self.length)
+
+
+def disc_offsets(discs: int, length: float) -> tuple[float, ...]:
+    """Offsets [m] along the heading of ``discs`` disc centres covering a body of ``length`` [m]:
+    the middles of equal pieces, ``(0.0,)`` for one disc."""
+    if discs == 1:
+        return (0.0,)
+    return tuple(length * ((i + 0.5) / discs - 0.5) for i in range(discs))
+
+
+def check_body(owner: Any, prefix: str) -> None:
+    """Check (and store) ``owner``'s ``discs`` (an integer >= 1) and ``length`` (finite, >= 0 [m],
+    > 0 with several discs); errors name ``prefix.field``."""
+    object.__setattr__(owner, "discs", checks.integer(f"{prefix}.discs", owner.discs, minimum=1))
+    set_numbers(owner, f"{prefix}.", ("length",))
+    checks.positive(f"{prefix}.length", owner.length, strict=owner.discs > 1)
 
 
 @dataclass(frozen=True)
@@ -176,9 +203,19 @@ class CrossingObject:
     """Mass $m_o$ [kg]."""
     uncertainty: Uncertainty | None = None
     """Its own prediction spread; None (default): the scenario's ``uncertainty``."""
+    discs: int = 1
+    """Collision discs of radius ``radius`` along its heading (1: the paper's single disc)."""
+    length: float = 0.0
+    """Body length [m] the discs cover: their centres lie at the middles of ``discs`` equal pieces
+    of it, centred on the pose (no effect with one disc)."""
 
     def __post_init__(self) -> None:
         check_object(self, "object")
+
+    @property
+    def disc_offsets(self) -> tuple[float, ...]:
+        """Offsets [m] of the disc centres along the heading (:func:`disc_offsets`)."""
+        return disc_offsets(self.discs, self.length)
 
 
 def check_object(obj: CrossingObject, prefix: str) -> None:
@@ -188,6 +225,7 @@ def check_object(obj: CrossingObject, prefix: str) -> None:
     set_numbers(obj, f"{prefix}.", ("speed", "turn_rate", "radius", "mass"))
     checks.positive(f"{prefix}.radius", obj.radius)
     checks.positive(f"{prefix}.mass", obj.mass)
+    check_body(obj, prefix)
     if obj.uncertainty is not None and not isinstance(obj.uncertainty, Uncertainty):
         raise TypeError(
             f"{prefix}.uncertainty must be an Uncertainty, a preset name or None, got"

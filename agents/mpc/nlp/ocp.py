@@ -372,11 +372,13 @@ def assemble(
 def problem_key(scenario: Scenario) -> tuple[Any, ...]:
     r"""What of the scenario is built into a solver: all but the parameters ($\epsilon$, $v_{ref}$, the
     uncertainty, every object's numbers: each slot's are parameters) and what the NLP never sees
-    (the ego's start and initial input, measured at each step; the episode's step limit). The
+    (the ego's start and initial input, measured at each step; the episode's step limit), but
+    with the objects' discs (their offsets shape the rows). The
     slot count is the agent's, keyed beside this."""
     rest = max(scenario.ego.v_min, 0.0)  # a valid v_ref and input for every ego
     ego = dataclasses.replace(scenario.ego, start=PARKED, v_ref=rest, initial_input=(rest, 0.0))
     skip = ("risk_tolerance", "uncertainty", "max_steps", "ego", "objects")
     fields = dataclasses.fields(scenario)
     kept = tuple((f.name, getattr(scenario, f.name)) for f in fields if f.name not in skip)
-    return (("ego", ego), *kept)
+    bodies = tuple(o.disc_offsets for o in scenario.objects)  # the rows' pairs of discs: built in
+    return (("ego", ego), ("bodies", bodies), *kept)

@@ -89,6 +89,12 @@ class IntervalModel:
     centred: bool = False
     """Whether a mode's mean along the route lies at the middle of its interval (its box, which is
     symmetric about the mean, then no longer than the interval) instead of at the IDM's mean run."""
+    yield_to_ego: bool = False
+    """Whether every box ends where a fast run with the ego standing (braking fully, even in a
+    prediction given that it goes) stops the road user: behind the ego if it follows it, before
+    it if it yields to it (highway-env's rule: lower priority, or the same and behind; nobody
+    else is yielded to). A road user held so passes that point only into room the ego has left
+    (the ego never reverses), so no box runs through a standing ego, and standing stays a plan."""
     ego_leads: bool = True
     """Whether the ego brakes fully in the fast run too (else it follows the fast IDM): a road user
     behind the ego on its lane is then bounded behind an ego that stops, so that no box of it
@@ -103,7 +109,7 @@ class IntervalModel:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"IntervalModel.{name} must be a finite number >= 0, got {value!r}")
-        for name in ("upper_yields", "ego_brakes", "ego_leads", "split_yield", "centred"):
+        for name in ("upper_yields", "ego_brakes", "ego_leads", "split_yield", "centred", "yield_to_ego"):
             if not isinstance(getattr(self, name), bool):
                 raise TypeError(f"IntervalModel.{name} must be a bool, got {getattr(self, name)!r}")
 
@@ -203,7 +209,14 @@ def interval_bounds(
     first_yield = np.zeros(count)
     slow = model.run(agents, steps, dt, yielding=model.model.yielding, yields=first_yield, **slow_options)
     margin = intervals.margin_rate * np.arange(steps + 1) * dt
-    union = _envelope([slow, fast, mean], margin)
+    cap = None
+    if intervals.yield_to_ego and ego.any():  # the ego stands: who follows it or yields to it stops
+        options = {**fast_options, "scripted": ego, "script": None, "exempt": ego, "yield_to": ego}
+        standing = lane_model.run(
+            agents, steps, dt, yielding=True, partners=np.flatnonzero(agents.representative), **options
+        )
+        cap = np.where(ego[:, None], np.inf, standing[0] + margin)
+    union = _capped(_envelope([slow, fast, mean], margin), cap)
     if not (intervals.split_yield and model.model.yielding):
         return IntervalBounds(union)
     free_slow = model.run(agents, steps, dt, yielding=False, **slow_options)
@@ -215,6 +228,14 @@ def interval_bounds(
     )
     waiting = held & (first_yield == 0)
     chance = np.where(first_yield > 0, first_yield, np.where(waiting, first_yield.max(), 0.0))
-    return IntervalBounds(
-        union, _envelope([slow, held_fast], margin), _envelope([free_slow, fast], margin), chance
-    )
+    held_bounds = _capped(_envelope([slow, held_fast], margin), cap)
+    return IntervalBounds(union, held_bounds, _capped(_envelope([free_slow, fast], margin), cap), chance)
+
+
+def _capped(bounds: Bounds, cap: np.ndarray | None) -> Bounds:
+    """``bounds`` with the upper arc length at most ``cap`` ``(A, steps+1)`` (None: as they are), and
+    never below the lower one."""
+    if cap is None:
+        return bounds
+    lo, hi, v_lo, v_hi = bounds
+    return lo, np.maximum(lo, np.minimum(hi, cap)), v_lo, v_hi

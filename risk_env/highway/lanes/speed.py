@@ -155,6 +155,7 @@ class SpeedModel:
         script: tuple[float, float] | None = None,
         exempt: np.ndarray | None = None,
         yields: np.ndarray | None = None,
+        yield_to: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         r"""Arc lengths and speeds ``(A, steps+1)`` of every agent at n = 0..steps (step ``dt`` [s]).
         By default with the model's numbers; the interval prediction sets, per agent, the IDM's
@@ -168,7 +169,8 @@ class SpeedModel:
         ``(A,)`` float array, filled with the probability that each agent yields at the first check
         at which it yields in this run (0 where it never does): one minus the chance, over the road
         users it yields to, that none of them is on a route it yields to (their routes'
-        :attr:`Agents.weight`, independent)."""
+        :attr:`Agents.weight`, independent). ``yield_to`` ``(A,)`` bool: the agents yielded to under
+        the rule (default the partners)."""
         m, table = self.model, self.table
         count = len(agents.vehicle)
         samples = _stack([route.samples for route in agents.routes])
@@ -190,6 +192,7 @@ class SpeedModel:
         ticks = max(int(round(m.regulation_period / h)), 1)
         reps = np.flatnonzero(agents.representative) if partners is None else partners
         yielding = m.yielding if yielding is None else yielding
+        yielded_to = reps if yield_to is None else np.flatnonzero(yield_to)
         if yields is not None:
             yields[:] = 0.0
         for k in range(steps * m.substeps):
@@ -201,7 +204,7 @@ class SpeedModel:
             normal = np.column_stack([-np.sin(heading), np.cos(heading)])
             points = xyh[:, :2] + (agents.r * math.exp(-k * h / m.lateral_time))[:, None] * normal
             if yielding and k % ticks == 0:
-                now, chance = self._yielders(agents, samples, s, v, points, heading, lane, reps)
+                now, chance = self._yielders(agents, samples, s, v, points, heading, lane, yielded_to)
                 if exempt is not None:
                     now, chance = now & ~exempt, np.where(exempt, 0.0, chance)
                 if yields is not None:
