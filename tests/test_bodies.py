@@ -17,7 +17,7 @@ from agents import RMPC, SMPC
 from risk_env import Scenario, make_estimator, predict_array
 from risk_env import observation as ob
 from risk_env.prediction.belief import Belief
-from risk_env.risk.bodies import BodyRisk, cover_radius, moved_belief, moved_ego
+from risk_env.risk.bodies import BodyRisk, cover_radius, moved_belief, moved_draws, moved_ego
 from risk_env.scenario.parts import disc_offsets
 
 CAR = {"discs": 3, "length": 5.0, "radius": cover_radius(5.0, 2.0, 3)}
@@ -238,3 +238,33 @@ def test_the_planners_keep_their_promise_for_bodies_of_discs(kind):
             nearest = min(nearest, float(np.max(report.risk)))
     # the rows bind: the RMPC's plans touch a box, the SMPC's use its tolerance
     assert nearest < 0.05 if kind == "rmpc" else nearest > 0.2 * epsilon
+
+
+def test_monte_carlo_draws_move_with_the_objects_discs_at_every_step():
+    """Draws ``(J, N, 3)`` against beliefs of N steps (the SMPC's numpy risk): each object disc's
+    draws are the centre's moved along that step's heading, and the risk sums the pairs."""
+    s = Scenario.preset("low", severity="probability", **BODIES)
+    est = make_estimator("monte_carlo", s)
+    theta = np.array([0.0, 0.5, 1.0])
+    b = Belief(
+        np.zeros(3),
+        np.zeros(3),
+        theta,
+        np.full(3, 5.0),
+        *(np.full(3, x) for x in (1.0, 0.5, 0.1, 2.0, 1.0)),
+        np.full(3, 4.0),
+        np.full(3, 6.0),
+        frame=theta,
+    )
+    draws = b.sample(np.random.default_rng(0), 50)  # (J, N, 3)
+    moved = moved_draws(draws, 2.0, theta)
+    assert np.allclose(moved[..., 0] - draws[..., 0], 2.0 * np.cos(theta))
+    assert np.allclose(moved[..., 1] - draws[..., 1], 2.0 * np.sin(theta))
+    ego = np.array([[1.0, 2.0, 0.3, 5.0]] * 3)
+    pairs = sum(
+        est.inner.risk(moved_ego(ego, a), moved_belief(b, c), draws=moved_draws(draws, c, theta))
+        for a in s.ego.disc_offsets
+        for c in s.object.disc_offsets
+    )
+    assert np.allclose(est.risk(ego, b, draws=draws), pairs)
+    assert pairs.max() > 0

@@ -100,9 +100,9 @@ def moved_draws(draws: Any, offset: float, theta: Any) -> Any:
     c, s = _cos_sin(theta)
     if _symbolic(draws):
         return ca.horzcat(draws[:, 0] + offset * c, draws[:, 1] + offset * s, draws[:, 2])
-    out = np.array(draws, dtype=float, copy=True)
-    out[..., 0] += offset * np.asarray(c)[..., None] if np.ndim(c) else offset * c
-    out[..., 1] += offset * np.asarray(s)[..., None] if np.ndim(s) else offset * s
+    out = np.array(draws, dtype=float, copy=True)  # (..., 3) with theta broadcasting over ``...``
+    out[..., 0] += offset * c
+    out[..., 1] += offset * s
     return out
 
 
