@@ -16,7 +16,9 @@ ended in the crash): with d the unit vector from the ego's centre to the centre 
 hit (the crashed vehicle nearest the ego), the ego's closing speed is ``v_e . d`` and the other's
 ``-v_o . d`` (velocities along each heading). The ego *drove into* the vehicle when its closing
 speed exceeds the other's; otherwise the vehicle *drove into the ego* (rear-ended, or hit while
-stopped or yielding).
+stopped or yielding). An ego that stood (speed below :data:`STOPPED_SPEED`) drove into nothing:
+a vehicle whose front swings into it while it reverses along a curve closes on it at a corner,
+not at its centre.
 
 **Deadlock** (:func:`deadlocked`): an episode without a collision or the goal whose ego was
 stopped (speed below :data:`STOPPED_SPEED`) at every step's end over its last
@@ -72,6 +74,8 @@ def crash_kind(base: Any, before: dict[int, tuple[np.ndarray, np.ndarray]]) -> s
     ]
     other = min(hit, key=lambda v: float(np.hypot(*(v.position - ego.position))))
     p_e, v_e = before.get(id(ego), (np.array(ego.position), np.zeros(2)))
+    if float(np.hypot(*v_e)) < STOPPED_SPEED:
+        return "other"
     p_o, v_o = before.get(id(other), (np.array(other.position), np.zeros(2)))
     d = p_o - p_e
     d = d / max(float(np.hypot(*d)), 1e-9)

@@ -17,7 +17,7 @@ from agents import RMPC, SMPC
 from risk_env import Scenario, make_estimator, predict_array
 from risk_env import observation as ob
 from risk_env.prediction.belief import Belief
-from risk_env.risk.bodies import BodyRisk, cover_radius, moved_belief, moved_draws, moved_ego
+from risk_env.risk.bodies import BodyRisk, cover_radius, moved_belief, moved_draws, moved_ego, stretched
 from risk_env.scenario.parts import disc_offsets
 
 CAR = {"discs": 3, "length": 5.0, "radius": cover_radius(5.0, 2.0, 3)}
@@ -81,28 +81,48 @@ def test_cars_side_by_side_in_adjacent_lanes_touch_as_discs_not_as_bodies():
     st.floats(-math.pi, math.pi),
     st.floats(0.0, 2.0),
 )
-def test_the_worst_case_is_the_largest_over_the_pairs(x, y, th_e, th_o, half):
+def test_the_worst_case_keeps_every_ego_disc_off_the_objects_capsule(x, y, th_e, th_o, half):
+    """The largest over the ego's discs against the object's stretched box, at least the largest
+    over the nine pairs of discs (the capsule holds them), and the forms agree."""
     s = Scenario.preset("low", severity="probability", **BODIES)
     est = make_estimator("worst_case", s)
     ego = np.array([x, y, th_e, 4.0])
-    b = point(0.0, 0.0, th_o, half=half, sigma=0.3)
+    b = Belief(0.0, 0.0, th_o, 5.0, 0.3, 0.3, 0.1, half, 0.5 * half, 4.0, 6.0, frame=0.3)
     inner = est.inner
+    capsule = stretched(b, max(s.object.disc_offsets))
+    discs = [float(inner.risk(moved_ego(ego, a), capsule)) for a in s.ego.disc_offsets]
     pairs = [
-        inner.risk(moved_ego(ego, a), moved_belief(b, c))
+        float(inner.risk(moved_ego(ego, a), moved_belief(b, c)))
         for a in s.ego.disc_offsets
         for c in s.object.disc_offsets
     ]
-    assert float(est.risk(ego, b)) == pytest.approx(max(float(p) for p in pairs))
+    assert float(est.risk(ego, b)) == pytest.approx(max(discs))
+    assert max(discs) >= max(pairs)
     assert est.risk_one(tuple(ego), b) == pytest.approx(float(est.risk(ego, b)))
-    distances = [
+    distances = [float(inner.distance(moved_ego(ego, a), capsule)) for a in s.ego.disc_offsets]
+    assert float(est.distance(ego, b)) == pytest.approx(min(distances))
+    pair_distances = [
         float(inner.distance(moved_ego(ego, a), moved_belief(b, c)))
         for a in s.ego.disc_offsets
         for c in s.object.disc_offsets
     ]
-    assert float(est.distance(ego, b)) == pytest.approx(min(distances))
+    assert min(distances) <= min(pair_distances) + 1e-9
     X = ca.SX.sym("x", 4)
     margin = ca.Function("m", [X], [est.casadi_margin(X, b, 0.5)])
     assert (float(margin(ego)) >= 0) == (float(est.risk(ego, b)) <= 0.5)
+
+
+def test_the_capsules_box_holds_the_segment_of_centres():
+    """Every centre of the object's discs, and every point between them, lies in the stretched box
+    of every centre the belief allows (its corners here), in the belief's frame."""
+    b = Belief(1.0, -2.0, 0.7, 5.0, 0.3, 0.3, 0.1, 1.5, 0.4, 4.0, 6.0, frame=0.2)
+    box = stretched(b, 2.0)
+    for cx, cy in [(-1, -1), (-1, 1), (1, -1), (1, 1)]:
+        along, across = cx * b.half_x, cy * b.half_y  # a corner of the centres' box, in the frame
+        for t in np.linspace(-2.0, 2.0, 9):
+            dx = along + t * math.cos(b.theta - b.frame)
+            dy = across + t * math.sin(b.theta - b.frame)
+            assert abs(dx) <= box.half_x + 1e-12 and abs(dy) <= box.half_y + 1e-12
 
 
 def touching_share(s: Scenario, ego: np.ndarray, b: Belief, draws: np.ndarray) -> float:

@@ -255,6 +255,12 @@ def test_crash_kind_from_the_closing_speeds():
     assert crash_kind(base, {id(ego): moving, id(other): (np.array([4.0, 0.0]), np.zeros(2))}) == "ego"
     behind = {id(ego): still, id(other): (np.array([4.0, 0.0]), np.array([-6.0, 0.0]))}
     assert crash_kind(base, behind) == "other"
+    # a standing ego drove into nothing, even where the vehicle's centre moves away (its front
+    # swinging into the ego as it reverses along a curve: highway-env's IDM overshoots below 0 m/s)
+    away = {id(ego): still, id(other): (np.array([4.0, 0.0]), np.array([3.0, 1.0]))}
+    assert crash_kind(base, away) == "other"
+    creeping = (np.zeros(2), np.array([0.5, 0.0]))
+    assert crash_kind(base, {id(ego): creeping, id(other): away[id(other)]}) == "ego"
 
 
 def test_adapter_turn_rate_and_speed_translation():

@@ -7,8 +7,11 @@ ego's centre moved by $a_i$ along its heading and the object's mean by $b_j$ alo
 heading (:attr:`~risk_env.prediction.belief.Belief.theta`), the collision distance $r_e + r_o$ of
 the two discs. The bodies touch when any pair does, so
 
-- the worst case is the largest over the pairs (the distance to the nearest pair, the margin the
-  least over the pairs): exact for the bodies;
+- the worst case takes the object's discs as its capsule (:func:`stretched`): its centres' box
+  stretched by the half length $a_o$ of its segment of centres along its heading, the largest
+  over the ego's discs against it (the distance to the nearest, the margin the least). The
+  stretched box holds every centre of the object's discs and of the segment between them, whose
+  discs cover the car as well: a superset of the nine pairs, at a third of their rows;
 - Monte Carlo's expectation is the sum over the pairs: by Boole's inequality
   $E[1[\cup_{ij} C_{ij}]\, s] \le \sum_{ij} E[1[C_{ij}]\, s]$ for $s \ge 0$, an upper bound on the
   bodies' risk (pairs that overlap count twice);
@@ -93,6 +96,21 @@ def moved_belief(belief: Belief, offset: float) -> Belief:
     return Belief.unchecked(**{**fields, "x": belief.x + offset * c, "y": belief.y + offset * s})
 
 
+def stretched(belief: Belief, half_length: float) -> Belief:
+    """``belief`` with its truncation box grown to hold every point within ``half_length`` [m] of a
+    possible centre along the mean heading (its bounding box in the belief's frame)."""
+    if half_length == 0.0:
+        return belief
+    c, s = _cos_sin(belief.theta - belief.frame)
+    magnitude = ca.fabs if _symbolic(c) else np.abs
+    fields = vars(belief)
+    grown = {
+        "half_x": belief.half_x + half_length * magnitude(c),
+        "half_y": belief.half_y + half_length * magnitude(s),
+    }
+    return Belief.unchecked(**{**fields, **grown})
+
+
 def moved_draws(draws: Any, offset: float, theta: Any) -> Any:
     """Monte Carlo draws ``(..., 3)`` of ``(c1, c2, v)`` moved ``offset`` [m] along ``theta`` [rad]."""
     if offset == 0.0 or draws is None:
@@ -166,7 +184,11 @@ class BodyRisk(RiskEstimator):
         return BodyRisk(inner)
 
     def pairs(self, ego: Any, belief: Belief) -> list[tuple[Any, Belief, float]]:
-        """``(moved ego, moved belief, object offset)`` for every pair of discs."""
+        """``(moved ego, moved belief, object offset)`` for every pair of discs; the worst case:
+        every ego disc against the object's capsule (:func:`stretched`, offset 0)."""
+        if self.worst:
+            capsule = stretched(belief, self.half_lengths[1])
+            return [(moved_ego(ego, a), capsule, 0.0) for a in self.ego_offsets]
         bodies = [(b, moved_belief(belief, b)) for b in self.object_offsets]
         return [(moved_ego(ego, a), moved, b) for a in self.ego_offsets for b, moved in bodies]
 
@@ -235,9 +257,9 @@ class BodyRisk(RiskEstimator):
         return self._combine(values, CASADI)
 
     def distance(self, ego: Any, belief: Belief, ops: Ops = NUMPY) -> Any:
-        """Distance [m] from the nearest ego disc centre to the nearest possible object disc centre
-        (the worst-case estimators' :meth:`~risk_env.risk.worst_case.WorstCaseRisk.distance`, the
-        least over the pairs)."""
+        """Distance [m] from the nearest ego disc centre to the object's capsule's box (the worst-case
+        estimators' :meth:`~risk_env.risk.worst_case.WorstCaseRisk.distance`, the least over the
+        ego's discs)."""
         values = [self.inner.distance(e, b, ops) for e, b, _ in self.pairs(ego, belief)]
         out = values[0]
         for value in values[1:]:
