@@ -279,6 +279,22 @@ def test_adapter_turn_rate_and_speed_translation():
         assert end[2] - start[2] == pytest.approx(omega * adapter.dt, abs=0.02)
 
 
+def test_a_standing_car_keeps_its_wheels_straight():
+    # a turn rate asked of a car that stands (and stays so) sets no steering: its direction of travel
+    # stays its body's heading; asked to move off, it steers as before
+    env = make_intersection_env()
+    env.reset(seed=0)
+    place(env, (2.0, 40.0, -math.pi / 2, 0.0), [])
+    adapter = IntersectionAdapter(env, RMPC)
+    vehicle = env.unwrapped.vehicle
+    action, steering = adapter.highway_action(0.0, 0.8, 0.0, 0.5)
+    assert steering == 0.0 and action[1] == pytest.approx(0.0, abs=1e-6)
+    env.step(action)
+    assert vehicle_measurement(vehicle)[2] == pytest.approx(vehicle.heading, abs=1e-9)
+    _, steering = adapter.highway_action(2.0, 0.8, 0.0, 0.0)
+    assert steering > 0.1
+
+
 @pytest.mark.slow  # its NLPs (two slots of the lane predictor's modes) are the costliest to build here
 def test_smpc_in_intersection():
     """The exact SMPC through the adapter with its default (lane) predictor. The default run covers

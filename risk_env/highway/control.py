@@ -13,6 +13,11 @@ from risk_env.highway.common import slip_angle
 
 MIN_TURN_SPEED = 0.5
 """Below this mean speed [m/s] the steering for a turn rate is computed as at this speed."""
+STAND_SPEED = 0.1
+"""When both the asked and the current speed [m/s] are below this, the car stands (it moves under
+5 cm in a step) and its wheels are set straight: a standing car cannot turn, and steering it only
+swings its direction of travel (heading plus slip angle, what the MPC plans with) away from its body
+(by up to 0.7 rad at full lock, so that the discs of a car of several discs lie across the car)."""
 
 
 def highway_action(
@@ -22,7 +27,8 @@ def highway_action(
     ``steering`` [rad] of a vehicle of half length ``half_length`` [m], as the normalised action
     ``(2,)`` float32 of highway-env's ``action_type`` (a ``ContinuousAction``), and the steering
     angle [rad] it applies: acceleration ``(v - speed) / dt``, and the steering whose kinematic
-    bicycle turns at $\omega$ at the step's mean speed (:func:`slip_for`)."""
+    bicycle turns at $\omega$ at the step's mean speed (:func:`slip_for`); straight wheels for a car
+    that stands (:data:`STAND_SPEED`)."""
     accel = (v - speed) / dt
     mean = 0.5 * (v + speed)
     if abs(mean) < MIN_TURN_SPEED:
@@ -30,6 +36,8 @@ def highway_action(
     lo, hi = action_type.steering_range
     beta = slip_for(omega, mean, half_length, slip_angle(steering), slip_angle(hi), dt)
     steering = float(np.clip(math.atan(2.0 * math.tan(beta)), lo, hi))
+    if max(abs(v), abs(speed)) < STAND_SPEED:
+        steering = 0.0
     a_lo, a_hi = action_type.acceleration_range
     normalised = np.array(
         [2.0 * (accel - a_lo) / (a_hi - a_lo) - 1.0, 2.0 * (steering - lo) / (hi - lo) - 1.0]
