@@ -34,10 +34,11 @@ def highway_action(
     if abs(mean) < MIN_TURN_SPEED:
         mean = math.copysign(MIN_TURN_SPEED, mean if mean != 0 else 1.0)
     lo, hi = action_type.steering_range
-    beta = slip_for(omega, mean, half_length, slip_angle(steering), slip_angle(hi), dt)
-    steering = float(np.clip(math.atan(2.0 * math.tan(beta)), lo, hi))
     if max(abs(v), abs(speed)) < STAND_SPEED:
         steering = 0.0
+    else:
+        beta = slip_for(omega, mean, half_length, slip_angle(steering), slip_angle(hi), dt)
+        steering = float(np.clip(math.atan(2.0 * math.tan(beta)), lo, hi))
     a_lo, a_hi = action_type.acceleration_range
     normalised = np.array(
         [2.0 * (accel - a_lo) / (a_hi - a_lo) - 1.0, 2.0 * (steering - lo) / (hi - lo) - 1.0]
