@@ -289,6 +289,11 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="the gate predicts the others given that the ego goes (lane+interval)",
     )
+    parser.add_argument(
+        "--gate-slow-approach",
+        action="store_true",
+        help="while the gate is closed the MPCs' reference speed lets half the braking stop at the line",
+    )
 
 
 def gate_settings(args: Any) -> Any:
@@ -304,4 +309,5 @@ def gate_settings(args: Any) -> Any:
         judge=getattr(args, "gate_judge", defaults.judge),
         tolerance=getattr(args, "gate_tolerance", defaults.tolerance),
         given_ego=getattr(args, "gate_given_ego", defaults.given_ego),
+        slow_approach=getattr(args, "gate_slow_approach", defaults.slow_approach),
     )

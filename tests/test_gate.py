@@ -273,6 +273,40 @@ def test_the_adapter_plans_against_the_virtual_object_which_is_not_scored():
         IntersectionAdapter(env, Stub, gate="on")
 
 
+def test_a_slow_approach_reaches_the_agents_speed_limit_and_the_command():
+    """With the gate shut and ``slow_approach``, each step the adapter hands the lane's agent the
+    gate's stop speed, which falls as the ego comes on; without the switch, no cap."""
+    pytest.importorskip("highway_env")
+    from benchmarks import highway_intersection
+    from benchmarks.highway_agents import gate_settings
+    from risk_env.highway import IntersectionAdapter, make_intersection_env
+    from risk_env.highway.gate_judge import GateSettings
+
+    class Stub:
+        def __init__(self, scenario, object_slots, predictor=None):
+            self.speed_limit, self.limits = math.inf, []
+
+        def predict(self, obs, episode_start=None, deterministic=True):
+            self.limits.append(self.speed_limit)
+            return np.array([6.0, 0.0]), None
+
+    for slow in (True, False):
+        env = make_intersection_env()
+        adapter = IntersectionAdapter(env, Stub, slots=3, gate=GateSettings(slow_approach=slow))
+        obs, _ = env.reset(seed=3)
+        adapter.reset()
+        adapter.gate.margin = 1e9  # shut whenever it judges
+        for _ in range(4):
+            obs, *_ = env.step(adapter.predict(obs)[0])
+        limits = adapter._agent_for(adapter.lane).limits
+        if slow:
+            assert all(math.isfinite(v) for v in limits) and limits == sorted(limits, reverse=True)
+        else:
+            assert limits == [math.inf] * 4
+    assert gate_settings(highway_intersection.parse_args(["--gate-slow-approach"])).slow_approach
+    assert not gate_settings(highway_intersection.parse_args([])).slow_approach
+
+
 def test_the_commands_gate_option_reaches_the_adapter():
     pytest.importorskip("highway_env")
     from benchmarks import highway_frontier, highway_intersection
@@ -299,3 +333,26 @@ def test_the_smpc_takes_back_a_refund_within_what_it_spent():
         with pytest.raises(ValueError, match="risk"):
             agent.refund(bad)
     assert agent.spent_risk() == pytest.approx(0.02)
+
+
+def test_a_closed_gate_slows_the_approach_so_that_the_ego_stops_at_the_line():
+    """With ``slow_approach``, a closed gate asks for a speed from which half the largest braking
+    stops the ego's disc at the virtual object, sqrt(a d); open, or without the switch, none.
+    (Measured: without it the MPC, whose 3 s horizon has no terminal row, came on at its reference
+    speed until it could no longer stop, and stood in the junction.)"""
+    g = gate()
+    g.slow_approach = True
+    assert g.stop_speed() == math.inf  # nothing judged yet
+    g.step(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
+    assert g.last.closed
+    stop = g.virtual()[0] - VIRTUAL_HALF - 4.0  # where the ego's centre must stop
+    assert g.stop_speed() == pytest.approx(math.sqrt(3.0 * (stop - 30.0)))
+    g.step(stop - 1.0, 2.0, crossing_at(60.0, -30.0, 10.0))
+    assert g.stop_speed() == pytest.approx(math.sqrt(3.0))
+    g.step(stop + 0.5, 0.0, crossing_at(60.0, -30.0, 10.0))  # past it: held just ahead, stand
+    assert g.last.closed and g.stop_speed() == pytest.approx(math.sqrt(3.0 * HOLD_GAP))
+    assert not g.decide(20.0, 5.0, crossing_at(60.0, -300.0, 10.0)).closed
+    assert g.stop_speed() == math.inf
+    plain = gate()  # the switch off: never a cap
+    plain.step(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
+    assert plain.last.closed and plain.stop_speed() == math.inf

@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 
 from risk_env.highway.gate import GateError, GatePredictor, JunctionGate, check_gate
-from risk_env.highway.gate_judge import CAR_HALF_LENGTH, GateSettings, conflict_chance, judged
+from risk_env.highway.gate_judge import (
+    CAR_HALF_LENGTH,
+    NEAR_STEPS,
+    GateSettings,
+    conflict_chance,
+    judged,
+)
 from risk_env.highway.lanes.predictor import EgoPlan
 from risk_env.prediction.mixture import Mixture, Mode
 from risk_env.prediction.predictors import Predictor
@@ -59,6 +65,24 @@ def test_boxes_that_grow_close_the_gate_where_the_mean_car_leaves_it_open():
     assert gate(Crossing(), judge="footprint").decide(30.0, 5.0, near).closed
 
 
+def test_the_near_judge_takes_the_boxes_over_the_horizon_and_the_mean_car_after():
+    belief = Crossing(growth=30.0).predict(crossing_at(60.0, -20.0, 10.0)[0], 10).modes[0].beliefs
+    near = judged(Mode(0.3, belief, "m"), "near").modes[0].beliefs
+    boxes = slice(0, NEAR_STEPS + 1)
+    assert np.array_equal(near.half_x[boxes], belief.half_x[boxes])
+    assert np.array_equal(near.frame[boxes], belief.frame[boxes])
+    assert np.all(near.half_x[NEAR_STEPS + 1 :] == CAR_HALF_LENGTH)
+    assert np.allclose(near.frame[NEAR_STEPS + 1 :], belief.theta[NEAR_STEPS + 1 :])
+    assert np.array_equal(near.x, belief.x) and np.array_equal(near.y, belief.y)
+    # a bound that reaches the zone only after the horizon, at 10 s from 4.5 s on: the boxes close
+    # the gate, the near judge does not; one that reaches it within the horizon closes both
+    late = crossing_at(60.0, -200.0, 10.0)
+    assert gate(Crossing(growth=40.0)).decide(30.0, 5.0, late).closed
+    assert not gate(Crossing(growth=40.0), judge="near").decide(30.0, 5.0, late).closed
+    soon = crossing_at(60.0, -80.0, 10.0)
+    assert gate(Crossing(growth=30.0), judge="near").decide(30.0, 5.0, soon).closed
+
+
 def test_the_chance_of_a_conflict_sums_each_vehicles_conflicting_modes():
     assert conflict_chance([]) == 0.0
     assert conflict_chance([0.2, 0.5]) == pytest.approx(1 - 0.8 * 0.5)
@@ -75,7 +99,7 @@ def test_the_chance_of_a_conflict_sums_each_vehicles_conflicting_modes():
 
 def test_the_settings_reach_the_gate_and_bad_ones_are_named():
     assert check_gate(True) == GateSettings() and check_gate(False) is None
-    mine = GateSettings(clearance=2.0, judge="footprint", tolerance=0.1, given_ego=True)
+    mine = GateSettings(clearance=2.0, judge="near", tolerance=0.1, given_ego=True, slow_approach=True)
     assert check_gate(mine) is mine
     with pytest.raises(GateError, match="gate must be True, False"):
         check_gate("footprint")
@@ -99,7 +123,7 @@ class Recorder(Predictor):
 
 
 def test_the_agents_predictor_gets_each_rows_observed_turn_signal(monkeypatch):
-    from risk_env.highway import gate as gate_module
+    from risk_env.highway import gate_virtual as gate_module
 
     inner = Recorder()
 

@@ -60,15 +60,10 @@ class PathFollowingMPC(RiskForm):
         risk_tolerance: $\epsilon$ [units of the severity], $\ge 0$; overrides the scenario's.
         solver: one of :data:`SOLVERS`.
         stage_cost: one of :data:`STAGE_COSTS` (see :mod:`agents.mpc.nlp.ocp`).
-        jit: run the solver on compiled code (see "Compiled solvers" in :mod:`agents.mpc.nlp.solver`); falls
-            back to the uncompiled solver (with a warning) when no C compiler exists or code
-            generation, compilation or loading fails. Off by default: the first build compiles
-            (the exact SMPC's three variants, shared by every uncertainty level and tolerance, in
-            about 40 s at -O1 on the project's machine; see :attr:`build_time`), later builds load
-            the cached library in well under a second; the evaluations then run about twice as
-            fast.
-        jit_opt: the C compiler's optimisation level (``-O1`` runs as fast as ``-O3`` here and
-            compiles in about 60 % of its time; ``-O0`` is no faster than uncompiled).
+        jit: run the solver on compiled code ("Compiled solvers" in :mod:`agents.mpc.nlp.solver`); falls
+            back to the uncompiled solver (with a warning) when compiling or loading fails. Off by
+            default: the first build compiles (:attr:`build_time`), later ones load the cached library.
+        jit_opt: the C compiler's optimisation level (``-O1``: as fast as ``-O3``, compiled sooner).
         jit_cache: directory where compiled solvers (shared libraries) are kept and reused by later
             processes; ``None``: a per-process temporary directory. Default:
             ``$RISKMPC_JIT_CACHE`` or ``~/.cache/riskcrossing/jit``.
@@ -78,11 +73,9 @@ class PathFollowingMPC(RiskForm):
             clearance, or risk over the severity's scale), so a converged plan stays a hair off the
             boundary where the worst-case risk's hard indicator jumps, and float32 observations
             cannot put the applied step on its wrong side.
-        cold_starts: how many initial-guess rollouts (best first) a level may try from cold: the
-            first step of an episode solves the hard problem from each of them and keeps the plan
-            of least cost (the problem is not convex: going round the object on either side,
-            waiting or reversing are separate local optima); the soft problem tries them after
-            the shifted plan.
+        cold_starts: how many initial-guess rollouts (best first) a level may try from cold; the
+            first step keeps the cheapest plan (going round either side, waiting or reversing are
+            separate local optima); the soft problem tries them after the shifted plan.
         max_solve_time: the wall-time cap of one step [s] (None: 20 % of the sample time;
             ``math.inf``: no cap, one solver per NLP).
         soft_penalty: $\rho$ of the soft problem's penalty $\rho \sum_n s_n$ [cost per margin unit];
@@ -162,6 +155,7 @@ class PathFollowingMPC(RiskForm):
         self.estimator = self.estimators[0]
         self._worsts = tuple(with_bodies(WorstCaseRisk(s)) for s in scenarios)
         self.risk_tolerance = scenario.risk_tolerance if risk_tolerance is None else risk_tolerance
+        self._speed_limit = math.inf
         self.settings = SolverSettings(
             solver=solver,
             stage_cost=stage_cost,
@@ -318,8 +312,7 @@ class PathFollowingMPC(RiskForm):
             self._problems[variant, rows] = cached_problem(key, build)
         return self._problems[variant, rows]
 
-    def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:
-        """:func:`agents.mpc.measure.risk_possible` for slot ``slot``'s object."""
+    def _risk_possible(self, x0: np.ndarray, future: Belief, slot: int = 0) -> bool:  # slot's object
         return measure.risk_possible(self.scenario, x0, future, float(self._numbers[slot, 0]))
 
     def _call(
@@ -369,6 +362,16 @@ class PathFollowingMPC(RiskForm):
             manoeuvre_time=self._manoeuvre_time,
         )
 
+    @property
+    def speed_limit(self) -> float:
+        """A cap [m/s] on $v_{ref}$ from the next step (a stop ahead: the junction gate's); inf: none."""
+        return self._speed_limit
+
+    @speed_limit.setter
+    def speed_limit(self, value: float) -> None:
+        inf = not isinstance(value, bool) and value == math.inf
+        self._speed_limit = math.inf if inf else checks.positive("speed_limit", value, strict=False)
+
     def _measure(self, index: int, obs_vec: np.ndarray) -> StepInput:
         r"""The step's data from the observation: the memory (dropped for a new episode), $x_0$, each
         present slot's beliefs at $n = 1, \dots, N$, the active slots, the NLP variant, the risk data and
@@ -390,9 +393,8 @@ class PathFollowingMPC(RiskForm):
         terms = self._terms_parameters(index, memory is None)
         objects = np.repeat(o.objects, self._slots.modes, axis=0)
         rows, keep = self._slots.packing(active, data.size > 0)
-        p = parameter_vector(
-            epsilon, self.scenario.ego.v_ref, objects[keep], active[keep], self._numbers[keep], data, terms
-        )
+        v_ref = min(self.scenario.ego.v_ref, self._speed_limit)
+        p = parameter_vector(epsilon, v_ref, objects[keep], active[keep], self._numbers[keep], data, terms)
         packed = [futures[j] if active[j] else None for j in keep]
         p = np.concatenate([p, self._slots.given_block(packed, weights[keep])])
         return StepInput(

@@ -118,7 +118,8 @@ class IntersectionAdapter:
         gate: the junction gate (:mod:`risk_env.highway.gate`, default on): before the junction, the
             MPC gets a virtual stationary object at the stop line whenever the ego could not cross
             the junction before another vehicle's predicted bounds reach its path; False: none; a
-            :class:`~risk_env.highway.gate_judge.GateSettings`: on, judging so.
+            :class:`~risk_env.highway.gate_judge.GateSettings`: on, judging so (with
+            ``slow_approach``, each step it sets the lane agent's ``speed_limit``, if it has one).
     """
 
     def __init__(
@@ -257,6 +258,8 @@ class IntersectionAdapter:
         planned = np.vstack([virtual, self.last_objects])
         obs = layout.build((x, y, theta), (speed, self._omega), lam, error, planned, self.slots)
         agent = self._agent_for(self.lane)
+        if self.gate is not None and hasattr(agent, "speed_limit"):
+            agent.speed_limit = self.gate.stop_speed()
         action, _ = agent.predict(obs, episode_start=self._fresh or switched, deterministic=True)
         self._fresh = False
         self.last_observation = obs

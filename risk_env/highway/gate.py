@@ -64,13 +64,41 @@ from risk_env.highway.gate_judge import (
     occupancy,
     travel_time,
 )
+from risk_env.highway.gate_virtual import (
+    MATCH,
+    SIGNAL_MATCH,
+    VIRTUAL_HALF,
+    VIRTUAL_SIGMA,
+    GateError,
+    GatePredictor,
+    is_virtual,
+    standing,
+)
 from risk_env.highway.lane_agents import lane_scenario
 from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
 from risk_env.highway.route import RoutePath
-from risk_env.prediction.belief import Belief
 from risk_env.prediction.mixture import Mixture
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
 from risk_env.scenario.scenario import Scenario
+
+__all__ = [
+    "HOLD_GAP",
+    "LINE_BUFFER",
+    "MATCH",
+    "SIGNAL_MATCH",
+    "VIRTUAL_HALF",
+    "VIRTUAL_SIGMA",
+    "GateDecision",
+    "GateError",
+    "GatePredictor",
+    "JunctionGate",
+    "check_gate",
+    "is_virtual",
+    "junction_span",
+    "make_gate",
+    "standing",
+    "travel_time",
+]
 
 JUNCTION_PREFIX = "ir"
 """A route lane from a node named so lies inside highway-env's intersection (``ir*`` -> ``il*``)."""
@@ -78,24 +106,11 @@ GATE_STEPS = 20
 """Most prediction steps the gate looks ahead (10 s at T = 0.5 s)."""
 GATE_RANGE = 40.0
 """Distance [m] of the ego to the junction within which the gate judges (farther: open)."""
-VIRTUAL_SIGMA = 0.05
-"""Standard deviation [m] of the virtual object's position (and [m/s] of its speed)."""
-VIRTUAL_HALF = 0.15
-"""Half width [m] of its truncation box."""
 LINE_BUFFER = 1.5
 """How far [m] before the line the virtual object stops the ego's front (the plan brakes late and
 highway-env's car lags it)."""
 HOLD_GAP = 0.5
 """Gap [m] between the ego's disc and the virtual object when it holds an ego past the line."""
-SIGNAL_MATCH = 0.05
-"""Largest distance [m] between a row an agent's predictor is asked about and an observed road user
-for the row to get that road user's turn signal (float32 observations round by far less)."""
-MATCH = 1e-3
-"""Largest difference (float32 observation rounding) between a measurement and the virtual one."""
-
-
-class GateError(ValueError):
-    """A bad value for the junction gate (names the parameter and what was expected)."""
 
 
 def check_gate(gate: Any) -> GateSettings | None:
@@ -155,6 +170,7 @@ class JunctionGate:
         given_ego: bool = False,
         judge: str = "boxes",
         tolerance: float = 0.0,
+        slow_approach: bool = False,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -174,6 +190,8 @@ class JunctionGate:
         self.tolerance = float(tolerance)
         """The chance of a conflict the gate accepts (0: none, every counted mode)."""
         self.given_ego = bool(given_ego)
+        self.slow_approach = bool(slow_approach)
+        """Whether a closed gate caps the agents' reference speed (:meth:`stop_speed`)."""
         """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.clearance = min(self.reach, GATE_CLEARANCE)
         """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
@@ -289,6 +307,16 @@ class JunctionGate:
         self.refunded += charged
         return charged
 
+    def stop_speed(self) -> float:
+        r"""With :attr:`slow_approach` and the gate closed, the highest speed [m/s] from which half the
+        ego's largest braking stops it where its disc meets the virtual object, $\sqrt{a d}$ ($d$
+        [m] the distance left; 0 past it); else inf. The MPC's horizon has no terminal row: without
+        the cap it comes on at its reference speed until it can no longer stop before the line."""
+        if not (self.slow_approach and self.last.closed):
+            return math.inf
+        d = self._held - VIRTUAL_HALF - self.reach - self._progress
+        return math.sqrt(self.accel * max(d, 0.0))
+
     def virtual(self) -> np.ndarray:
         """The virtual object's measurement ``(5,)``: standing on the ego's route where the ego's disc
         touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry, heading along
@@ -325,75 +353,3 @@ def make_gate(
     gate.clearance = min(gate.reach, checks.positive("GateSettings.clearance", clearance))
     gate.wrapper = None if predictor is None else GatePredictor(predictor)
     return gate, gate.wrapper
-
-
-def is_virtual(rows: np.ndarray, virtual: np.ndarray | None) -> np.ndarray:
-    """``(m,)`` which of the measurements ``rows (m, 5)`` are ``virtual`` (within :data:`MATCH`)."""
-    rows = np.asarray(rows, dtype=float).reshape(-1, 5)
-    if virtual is None:
-        return np.zeros(len(rows), dtype=bool)
-    return np.all(np.abs(rows - virtual[None, :]) <= MATCH, axis=1)
-
-
-def standing(measurement: np.ndarray, steps: int) -> Mixture:
-    """The virtual object's belief: at ``measurement``'s position over n = 0..``steps``, speed 0,
-    spread :data:`VIRTUAL_SIGMA` truncated at :data:`VIRTUAL_HALF`."""
-    n = steps + 1
-    m = np.asarray(measurement, dtype=float)
-    full = lambda value: np.full(n, float(value))  # noqa: E731
-    belief = Belief(
-        x=full(m[0]), y=full(m[1]), theta=full(m[2]), speed=full(0.0),
-        sigma_x=full(VIRTUAL_SIGMA), sigma_y=full(VIRTUAL_SIGMA), sigma_v=full(VIRTUAL_SIGMA),
-        half_x=full(VIRTUAL_HALF), half_y=full(VIRTUAL_HALF),
-        v_lo=full(-VIRTUAL_HALF), v_hi=full(VIRTUAL_HALF), frame=full(m[2]),
-    )  # fmt: skip
-    return Mixture.single(belief, "stop line")
-
-
-class GatePredictor(Predictor):
-    """``inner`` for every road user but the gate's virtual object, which stands still
-    (:func:`standing`); the virtual object is left out of ``inner``'s scene (nobody yields to it)."""
-
-    name = "gate"
-
-    def __init__(self, inner: Predictor) -> None:
-        if not isinstance(inner, Predictor):
-            raise GateError(f"inner must be a Predictor, got {checks.describe(inner)}")
-        self.inner = inner
-        self.max_modes = inner.max_modes
-        self.virtual: np.ndarray | None = None
-        """The virtual object's measurement this step, or None (the gate is open)."""
-        self.signals: tuple[np.ndarray, list] | None = None
-        """This step's observed road users ``(m, 5)`` and their turn signals (one ``(2,)`` or None
-        each), or None: passed on to a lane predictor for the rows it is asked about."""
-        self.ego_plan: EgoPlan | None = None
-        """What the ego does this step for a lane predictor's prediction given it (the gate's
-        ``given_ego`` and open: it drives its route), or None (it brakes)."""
-
-    def predict(self, measurement: Any, steps: int) -> Mixture:
-        return self.predict_scene(np.asarray(measurement, dtype=float)[None], steps)[0]
-
-    def predict_scene(self, measurements: Any, steps: int) -> list[Mixture]:
-        rows = np.asarray(measurements, dtype=float).reshape(-1, 5)
-        virtual = is_virtual(rows, self.virtual)
-        real = iter(self._inner(rows[~virtual], steps) if (~virtual).any() else [])
-        return [standing(row, steps) if v else next(real) for row, v in zip(rows, virtual, strict=True)]
-
-    def _inner(self, rows: np.ndarray, steps: int) -> list[Mixture]:
-        """``inner``'s mixtures of ``rows``; a lane predictor is also given each row's turn signal
-        when it is one of this step's observed road users (within :data:`SIGNAL_MATCH`), and
-        :attr:`ego_plan`."""
-        if not isinstance(self.inner, LanePredictor):
-            return self.inner.predict_scene(rows, steps)
-        if self.signals is None:
-            return self.inner.predict_scene(rows, steps, ego_plan=self.ego_plan)
-        seen, signals = self.signals
-        gap = np.hypot(rows[:, None, 0] - seen[None, :, 0], rows[:, None, 1] - seen[None, :, 1])
-        nearest = np.argmin(gap, axis=1) if len(seen) else np.zeros(len(rows), dtype=int)
-        mine = [
-            signals[k] if len(seen) and gap[i, k] <= SIGNAL_MATCH else None for i, k in enumerate(nearest)
-        ]
-        return self.inner.predict_scene(rows, steps, signals=mine, ego_plan=self.ego_plan)
-
-    def __repr__(self) -> str:
-        return f"GatePredictor({self.inner!r})"

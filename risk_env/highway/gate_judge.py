@@ -7,6 +7,10 @@ r"""How the junction gate judges a vehicle's prediction (:class:`~risk_env.highw
 - ``"footprint"``: each mode occupies the points its mean car covers: a rectangle of highway-env's
   car (:data:`CAR_HALF_LENGTH` by :data:`CAR_HALF_WIDTH`, turned by the mode's mean heading) about
   its mean, so that a mode stands for where the vehicle is most likely, not for all it could do.
+- ``"near"``: its truncation boxes over the first :data:`NEAR_STEPS` steps (the MPCs' horizon of
+  3 s, within which their own rows keep the ego off the same boxes), its mean car after: the boxes
+  of the far future, which grow from the slowest to the fastest run, judge a gap the ego will have
+  left before they are likely.
 
 A mode conflicts when it occupies a point while the ego would be there, with the gate's margin to
 spare. With ``tolerance`` 0 the gate closes when any counted mode of any vehicle conflicts; above
@@ -35,7 +39,7 @@ GATE_THRESHOLD = 0.05
 """Weight of a vehicle's route hypothesis from which the gate reckons with it."""
 SUBSTEPS = 4
 """Time samples per prediction step (positions linear in between)."""
-JUDGES = ("boxes", "footprint")
+JUDGES = ("boxes", "footprint", "near")
 """The gate's ways of judging a mode (module docstring)."""
 
 
@@ -58,8 +62,14 @@ class GateSettings:
     given_ego: bool = False
     """Whether the others are predicted given that the ego goes (the lane predictor with an ego):
     by the gate, and, while it is open, by the agents' predictor too."""
+    slow_approach: bool = False
+    r"""Whether, while the gate is closed, the agents' reference speed is capped at $\sqrt{a d}$, from
+    which half the ego's largest braking $a$ stops it at the stop line $d$ ahead
+    (:meth:`~risk_env.highway.gate.JunctionGate.stop_speed`)."""
 
 
+NEAR_STEPS = 6
+"""Prediction steps the ``"near"`` judge judges by the boxes (then by the mean car)."""
 CAR_HALF_LENGTH = 2.5
 """Half of highway-env's ``Vehicle.LENGTH`` [m]."""
 CAR_HALF_WIDTH = 1.0
@@ -67,15 +77,18 @@ CAR_HALF_WIDTH = 1.0
 
 
 def judged(mode: Mode, judge: str) -> Mixture:
-    """``mode`` alone, weight 1, as ``judge`` sees it: its truncation boxes, or its mean car."""
+    """``mode`` alone, weight 1, as ``judge`` sees it: its truncation boxes, its mean car, or both in turn."""
     mode = dataclasses.replace(mode, weight=1.0, share=1.0)
-    if judge == "footprint":
+    if judge in ("footprint", "near"):
         b = mode.beliefs
+        far = np.ones(len(b.half_x), dtype=bool)
+        if judge == "near":
+            far[: NEAR_STEPS + 1] = False
         car = dataclasses.replace(
             b,
-            half_x=np.full_like(b.half_x, CAR_HALF_LENGTH),
-            half_y=np.full_like(b.half_y, CAR_HALF_WIDTH),
-            frame=np.asarray(b.theta, dtype=float),
+            half_x=np.where(far, CAR_HALF_LENGTH, b.half_x),
+            half_y=np.where(far, CAR_HALF_WIDTH, b.half_y),
+            frame=np.where(far, np.asarray(b.theta, dtype=float), b.frame),
         )
         mode = dataclasses.replace(mode, beliefs=car)
     return Mixture((mode,))
