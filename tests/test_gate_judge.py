@@ -123,7 +123,7 @@ class Recorder(Predictor):
 
 
 def test_the_agents_predictor_gets_each_rows_observed_turn_signal(monkeypatch):
-    from risk_env.highway import gate_virtual as gate_module
+    from risk_env.highway import predictors as gate_module
 
     inner = Recorder()
 

@@ -248,12 +248,11 @@ class PathFollowingMPC(RiskForm):
     ) -> tuple[np.ndarray, None]:
         r"""SB3's predictor protocol: float32 action(s) ($v$ [m/s], $\omega$ [rad/s]) and no state.
 
-        ``observation``: one ``(10 + 6 K,)`` (K: :attr:`slots`) or a batch ``(B, 10 + 6 K)``,
-        each solved in turn with its own warm start (by batch index); the plan respects every
-        present object's risk bound (an observation with another slot count:
-        ``ValueError``). ``episode_start`` (bool or ``(B,)``) drops the warm start;
-        so does a new episode detected from the observation (its last applied input is not the
-        action returned, or the ego is over 1 m from where the plan put it)."""
+        ``observation``: one ``(10 + 6 K,)`` (K: :attr:`slots`) or a batch ``(B, 10 + 6 K)``, each solved in
+        turn with its own warm start (by batch index); the plan respects every present object's risk bound
+        (another slot count: ``ValueError``). ``episode_start`` (bool or ``(B,)``) drops the warm start; so
+        does a new episode detected from the observation (its last applied input is not the action
+        returned, or the ego is over 1 m from where the plan put it)."""
         size = ob.size(self.slots)
         forget = lambda i: self._memory.pop(i, None)  # noqa: E731  (a new episode of batch entry i)
         actions, reports = predict_each(observation, size, episode_start, forget, self._step)
@@ -340,8 +339,7 @@ class PathFollowingMPC(RiskForm):
         return result.report
 
     def _context(self, data: StepInput | None = None) -> StepContext:
-        r"""What a step uses that the controller owns (its risk with the rows' weights and its
-        $\epsilon$: ``data``'s)."""
+        r"""What a step uses that the controller has (risk with the rows' weights, $\epsilon$: ``data``'s)."""
         weights = None if data is None else data.weights
         epsilon = self._epsilon if data is None else data.epsilon
         rows = self._slots.rows if data is None or data.rows is None else data.rows

@@ -64,7 +64,9 @@ from risk_env.highway.gate_judge import (
     occupancy,
     travel_time,
 )
-from risk_env.highway.gate_virtual import (
+from risk_env.highway.lane_agents import lane_scenario
+from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
+from risk_env.highway.predictors import (
     MATCH,
     SIGNAL_MATCH,
     VIRTUAL_HALF,
@@ -74,8 +76,6 @@ from risk_env.highway.gate_virtual import (
     is_virtual,
     standing,
 )
-from risk_env.highway.lane_agents import lane_scenario
-from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
 from risk_env.highway.route import RoutePath
 from risk_env.prediction.mixture import Mixture
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
