@@ -47,6 +47,14 @@ FILES = ("gate.csv", "gate.md")
 FIELDS = ("seed", "step", "time_s", "free", "open", "slack_s")
 
 
+JUDGED = {
+    "boxes": "truncation boxes",
+    "footprint": "mean car",
+    "near": "truncation boxes over the MPCs' 3 s horizon and mean car after",
+}
+"""How the table's header names each judge's view of a mode."""
+
+
 def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
     """The judged steps of episode ``seed`` (see the module): one row each."""
     from benchmarks.highway_agents import built_predictor
@@ -135,7 +143,7 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
             f" clearance {args.clearance:g} m, margin {args.margin:g} s, others predicted"
             f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}"
             f"{', turn signals read' if args.signals else ''}; each mode judged by its"
-            f" {'mean car' if args.judge == 'footprint' else 'truncation boxes'}, the gate closing"
+            f" {JUDGED[args.judge]}, the gate closing"
             f" {closing}."
             " Wall time"
             f" {wall:.0f} s. Rates: of the steps judged (free, opened) or of the free steps (opened"

@@ -47,3 +47,10 @@ def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
     with pytest.raises(SystemExit):
         highway_gate.main(["--predictor", "constant", "--signals", "--out", str(tmp_path)])
     assert "--signals needs a lane predictor" in capsys.readouterr().err
+
+
+def test_the_header_names_every_judge():
+    from benchmarks.highway_gate import JUDGED
+    from risk_env.highway.gate_judge import JUDGES
+
+    assert set(JUDGED) == set(JUDGES) and len(set(JUDGED.values())) == len(JUDGES)
