@@ -314,16 +314,19 @@ class JunctionGate:
         the cap it comes on at its reference speed until it can no longer stop before the line."""
         if not (self.slow_approach and self.last.closed):
             return math.inf
-        d = self._held - VIRTUAL_HALF - self.reach - self._progress
-        return math.sqrt(self.accel * max(d, 0.0))
+        return math.sqrt(self.accel * max(self._held - self._touch(), 0.0))
+
+    def _touch(self) -> float:
+        """Route arc length [m] where the virtual object would touch the ego's disc now."""
+        return self._progress + self.reach + VIRTUAL_HALF
 
     def virtual(self) -> np.ndarray:
         """The virtual object's measurement ``(5,)``: standing on the ego's route where the ego's disc
         touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry, heading along
         the route."""
         s = max(self._line(), self._held)
-        if s < self._progress + self.reach + VIRTUAL_HALF:  # it would touch the ego: hold it here
-            s = self._progress + self.reach + VIRTUAL_HALF + HOLD_GAP
+        if s < self._touch():  # it would touch the ego: hold it here
+            s = self._touch() + HOLD_GAP
         self._held = s
         x, y = self.route.position(np.array([s]))[0]
         ahead = self.route.position(np.array([s + 0.5]))[0]
