@@ -145,8 +145,11 @@ def test_the_gate_never_closes_after_the_ego_commits():
     held = h.virtual()[0]
     assert held == pytest.approx(49.0 + 4.0 + VIRTUAL_HALF + HOLD_GAP)
     assert h.decide(49.0, 0.0, crossing_at(60.0, -25.0, 10.0)).closed and h.virtual()[0] == held
+    # an ego that crept on into it moves it no further than its disc: no new gap to creep into
     late = h.decide(52.0, 0.0, crossing_at(60.0, -25.0, 10.0))
-    assert late.closed and not late.committed and h.virtual()[0] > 52.0 + 4.0
+    assert late.closed and not late.committed and h.virtual()[0] == pytest.approx(52.0 + 4.0 + VIRTUAL_HALF)
+    assert h.decide(52.0, 0.0, crossing_at(60.0, -25.0, 10.0)).closed
+    assert h.virtual()[0] == pytest.approx(52.0 + 4.0 + VIRTUAL_HALF)
 
 
 def test_the_gate_predictor_keeps_the_virtual_object_out_of_the_scene():
@@ -351,6 +354,8 @@ def test_a_closed_gate_slows_the_approach_so_that_the_ego_stops_at_the_line():
     assert g.stop_speed() == pytest.approx(math.sqrt(3.0))
     g.step(stop + 0.5, 0.0, crossing_at(60.0, -30.0, 10.0))  # past it: held just ahead, stand
     assert g.last.closed and g.stop_speed() == pytest.approx(math.sqrt(3.0 * HOLD_GAP))
+    g.step(stop + 1.2, 0.5, crossing_at(60.0, -30.0, 10.0))  # crept into it: no room left, stand
+    assert g.last.closed and g.stop_speed() == 0.0
     assert not g.decide(20.0, 5.0, crossing_at(60.0, -300.0, 10.0)).closed
     assert g.stop_speed() == math.inf
     plain = gate()  # the switch off: never a cap

@@ -30,9 +30,11 @@ junction, each step, whether the ego can cross all of it first:
   ``accel`` ($v^2 / 2a$ beyond the distance left), or once its front is past the line: from then on
   the gate stays open this episode. A gate that closes when the ego can no longer stop before the
   line stays closed: the MPC brakes as hard as it can, and an ego that stopped past the line is held
-  where it is (the virtual object moved just ahead of its disc, never behind it) until the gate
-  opens. (Committing once the ego's centre passed the virtual object, measured on seeds 0-9, let
-  soft plans push through it into the junction: 1 and 3 collisions for the RMPC and SMPC.)
+  where it is until the gate opens: the virtual object moved :data:`HOLD_GAP` ahead of its disc as
+  the hold begins, then never behind the disc, but no farther (an ego that creeps into it gets no new
+  gap, so the slow approach's speed falls to 0). (Committing once the ego's centre passed the
+  virtual object, measured on seeds 0-9, let soft plans push through it into the junction: 1 and 3
+  collisions for the RMPC and SMPC.)
 
 The virtual object is predicted standing still with the spread :data:`VIRTUAL_SIGMA`, truncated at
 :data:`VIRTUAL_HALF` (:class:`GatePredictor`): its risk is exactly 0 while the ego's disc stays
@@ -203,6 +205,7 @@ class JunctionGate:
         """Steps this episode the gate was closed."""
         self.last = GateDecision(False, False)
         self._progress = self._held = -math.inf
+        self._was_closed = False
         self.refunded = 0.0
         """Risk charged to an SMPC's budget for the virtual object and given back (:meth:`refund`)."""
         self.wrapper: GatePredictor | None = None
@@ -224,6 +227,7 @@ class JunctionGate:
         """The verdict for the ego at route arc length ``progress`` [m] and ``speed`` [m/s], the
         other vehicles measured as ``others (m, 5)``, with their observed turn signals (``signals``,
         one ``(2,)`` or None each, for the lane predictor) if any."""
+        self._was_closed = self.last.closed
         if self.span is None or self.committed:
             self.last = GateDecision(False, True)
             return self.last
@@ -325,8 +329,11 @@ class JunctionGate:
         touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry, heading along
         the route."""
         s = max(self._line(), self._held)
-        if s < self._touch():  # it would touch the ego: hold it here
-            s = self._touch() + HOLD_GAP
+        if s < self._touch():  # it would touch the ego: hold the ego here
+            # with a gap only as the hold begins: a gap at every step let a creeping ego push the object
+            # on, half a metre at a time, into the junction's traffic
+            holding = self._was_closed and self._held > self._line()
+            s = self._touch() + (0.0 if holding else HOLD_GAP)
         self._held = s
         x, y = self.route.position(np.array([s]))[0]
         ahead = self.route.position(np.array([s + 0.5]))[0]
