@@ -328,12 +328,13 @@ class JunctionGate:
         """The virtual object's measurement ``(5,)``: standing on the ego's route where the ego's disc
         touches it with the ego's front :data:`LINE_BUFFER` before the junction's entry, heading along
         the route."""
-        s = max(self._line(), self._held)
-        if s < self._touch():  # it would touch the ego: hold the ego here
+        line, touch = self._line(), self._touch()
+        s = max(line, self._held)
+        if s < touch:  # it would touch the ego: hold the ego here
             # with a gap only as the hold begins: a gap at every step let a creeping ego push the object
             # on, half a metre at a time, into the junction's traffic
-            holding = self._was_closed and self._held > self._line()
-            s = self._touch() + (0.0 if holding else HOLD_GAP)
+            holding = self._was_closed and self._held > line
+            s = touch + (0.0 if holding else HOLD_GAP)
         self._held = s
         x, y = self.route.position(np.array([s]))[0]
         ahead = self.route.position(np.array([s + 0.5]))[0]
