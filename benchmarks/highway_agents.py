@@ -294,6 +294,11 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="while the gate is closed the MPCs' reference speed lets half the braking stop at the line",
     )
+    parser.add_argument(
+        "--gate-hard-stop",
+        action="store_true",
+        help="while the gate is closed the applied speed is clipped so too: nothing passes the line",
+    )
 
 
 def gate_settings(args: Any) -> Any:
@@ -310,4 +315,5 @@ def gate_settings(args: Any) -> Any:
         tolerance=getattr(args, "gate_tolerance", defaults.tolerance),
         given_ego=getattr(args, "gate_given_ego", defaults.given_ego),
         slow_approach=getattr(args, "gate_slow_approach", defaults.slow_approach),
+        hard_stop=getattr(args, "gate_hard_stop", defaults.hard_stop),
     )

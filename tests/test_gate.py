@@ -361,3 +361,59 @@ def test_a_closed_gate_slows_the_approach_so_that_the_ego_stops_at_the_line():
     plain = gate()  # the switch off: never a cap
     plain.step(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
     assert plain.last.closed and plain.stop_speed() == math.inf
+
+
+def test_a_hard_stop_clips_the_applied_speed_at_the_line():
+    """With ``hard_stop``, a closed gate clips the speed the adapter applies at the slow approach's
+    sqrt(a d), whatever the agent chose (0 once the ego's disc has crept into the virtual object);
+    open, or without the switch, the agent's speed passes."""
+    g = gate()
+    g.hard_stop = True
+    assert g.allowed_speed(6.0) == 6.0  # nothing judged yet
+    g.step(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
+    stop = g.virtual()[0] - VIRTUAL_HALF - 4.0
+    assert g.last.closed and g.allowed_speed(9.0) == pytest.approx(math.sqrt(3.0 * (stop - 30.0)))
+    assert g.allowed_speed(1.0) == 1.0  # slower than the clip: passes
+    assert g.stop_speed() == math.inf  # the reference speed is slow_approach's business
+    g.step(stop + 0.5, 0.0, crossing_at(60.0, -30.0, 10.0))
+    g.step(stop + 1.2, 0.5, crossing_at(60.0, -30.0, 10.0))  # crept into it: stand
+    assert g.last.closed and g.allowed_speed(3.0) == 0.0
+    assert not g.decide(20.0, 5.0, crossing_at(60.0, -300.0, 10.0)).closed
+    assert g.allowed_speed(6.0) == 6.0
+    plain = gate()
+    plain.step(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
+    assert plain.last.closed and plain.allowed_speed(9.0) == 9.0
+
+
+def test_the_adapter_applies_the_hard_stops_speed():
+    """The adapter clips the agent's speed by the gate (``--gate-hard-stop``): the same agent asking
+    for full speed toward a shut gate gets a lower acceleration with the switch than without."""
+    pytest.importorskip("highway_env")
+    from benchmarks import highway_intersection
+    from benchmarks.highway_agents import gate_settings
+    from risk_env.highway import IntersectionAdapter, make_intersection_env
+    from risk_env.highway.gate_judge import GateSettings
+
+    class Stub:
+        def __init__(self, scenario, object_slots, predictor=None):
+            self.speed_limit = math.inf
+
+        def predict(self, obs, episode_start=None, deterministic=True):
+            return np.array([10.0, 0.0]), None
+
+    commands = {}
+    for hard in (True, False):
+        env = make_intersection_env()
+        adapter = IntersectionAdapter(env, Stub, slots=3, gate=GateSettings(hard_stop=hard))
+        obs, _ = env.reset(seed=3)
+        adapter.reset()
+        adapter.gate.margin = 1e9  # shut whenever it judges
+        commands[hard] = []
+        for _ in range(3):
+            action = adapter.predict(obs)[0]
+            commands[hard].append(float(action[0]))
+            assert adapter.gate.last.closed
+            obs, *_ = env.step(action)
+    assert all(h < p for h, p in zip(commands[True], commands[False], strict=True))
+    assert gate_settings(highway_intersection.parse_args(["--gate-hard-stop"])).hard_stop
+    assert not gate_settings(highway_intersection.parse_args([])).hard_stop

@@ -119,7 +119,8 @@ class IntersectionAdapter:
             MPC gets a virtual stationary object at the stop line whenever the ego could not cross
             the junction before another vehicle's predicted bounds reach its path; False: none; a
             :class:`~risk_env.highway.gate_judge.GateSettings`: on, judging so (with
-            ``slow_approach``, each step it sets the lane agent's ``speed_limit``, if it has one).
+            ``slow_approach``, each step it sets the lane agent's ``speed_limit``, if it has one;
+            with ``hard_stop``, it clips the applied speed so).
     """
 
     def __init__(
@@ -268,6 +269,8 @@ class IntersectionAdapter:
             self.gate.refund(agent, self._last_solve)
         self.last_solves = [self._last_solve]
         v, omega = (float(a) for a in action)
+        if self.gate is not None:
+            v = self.gate.allowed_speed(v)
         highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)
         self._omega = omega
         return highway_action, None

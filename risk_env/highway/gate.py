@@ -173,6 +173,7 @@ class JunctionGate:
         judge: str = "boxes",
         tolerance: float = 0.0,
         slow_approach: bool = False,
+        hard_stop: bool = False,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -192,9 +193,11 @@ class JunctionGate:
         self.tolerance = float(tolerance)
         """The chance of a conflict the gate accepts (0: none, every counted mode)."""
         self.given_ego = bool(given_ego)
+        """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.slow_approach = bool(slow_approach)
         """Whether a closed gate caps the agents' reference speed (:meth:`stop_speed`)."""
-        """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
+        self.hard_stop = bool(hard_stop)
+        """Whether a closed gate clips the applied speed (:meth:`allowed_speed`)."""
         self.clearance = min(self.reach, GATE_CLEARANCE)
         """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
         the ego's centre has cleared a point)."""
@@ -318,6 +321,18 @@ class JunctionGate:
         the cap it comes on at its reference speed until it can no longer stop before the line."""
         if not (self.slow_approach and self.last.closed):
             return math.inf
+        return self._line_speed()
+
+    def allowed_speed(self, v: float) -> float:
+        r"""The speed [m/s] to apply for the agent's ``v``: with :attr:`hard_stop` and the gate closed, at
+        most $\sqrt{a d}$ (as :meth:`stop_speed`), so that whatever the agent chose (a soft plan that
+        trades the virtual object's risk for another's, a fallback manoeuvre ranked by all objects
+        alike) the ego stops where its disc meets the virtual object; else ``v``."""
+        if not (self.hard_stop and self.last.closed):
+            return v
+        return min(v, self._line_speed())
+
+    def _line_speed(self) -> float:
         return math.sqrt(self.accel * max(self._held - self._touch(), 0.0))
 
     def _touch(self) -> float:

@@ -66,6 +66,10 @@ class GateSettings:
     r"""Whether, while the gate is closed, the agents' reference speed is capped at $\sqrt{a d}$, from
     which half the ego's largest braking $a$ stops it at the stop line $d$ ahead
     (:meth:`~risk_env.highway.gate.JunctionGate.stop_speed`)."""
+    hard_stop: bool = False
+    r"""Whether, while the gate is closed, the *applied* speed is clipped at that $\sqrt{a d}$ too, so that
+    neither a soft plan nor a fallback manoeuvre carries the ego past the stop line
+    (:meth:`~risk_env.highway.gate.JunctionGate.allowed_speed`)."""
 
 
 NEAR_STEPS = 6
