@@ -23,6 +23,12 @@ not at its centre.
 **Deadlock** (:func:`deadlocked`): an episode without a collision or the goal whose ego was
 stopped (speed below :data:`STOPPED_SPEED`) at every step's end over its last
 :data:`DEADLOCK_WINDOW` seconds (a planner that froze, not one that was slow).
+
+**Jammed** (:func:`jammed`): at an episode's end without a collision or the goal, some other vehicle
+had stood inside the junction (on a lane from an ``ir*`` node, speed below :data:`STOPPED_SPEED`) at
+every step's end over the last :data:`DEADLOCK_WINDOW` seconds: highway-env's traffic locked in the
+junction (its yielding rule lets two vehicles each wait for the other), which no driver can cross
+while it lasts.
 """
 
 from __future__ import annotations
@@ -100,6 +106,30 @@ def deadlocked(
     return bool(np.all(speeds[last] < stopped))
 
 
+def standing_inside(base: Any, since: dict[int, float]) -> dict[int, float]:
+    """For every vehicle other than the ego that stands inside the junction now (``base.time``), the
+    time [s] since which it has at every step's end: its entry in ``since`` (the previous step's
+    result), else now."""
+    from risk_env.highway.gate import JUNCTION_PREFIX
+
+    now = float(base.time)
+    return {
+        id(v): since.get(id(v), now)
+        for v in base.road.vehicles
+        if v is not base.vehicle
+        and str(v.lane_index[0]).startswith(JUNCTION_PREFIX)
+        and abs(float(v.speed)) < STOPPED_SPEED
+    }
+
+
+def jammed(
+    since: dict[int, float], end: float, collision: bool, goal: bool, window: float = DEADLOCK_WINDOW
+) -> bool:
+    """Whether the junction was jammed at an episode's ``end`` [s] (neither ``collision`` nor
+    ``goal``): some vehicle of :func:`standing_inside`'s ``since`` has stood there for ``window`` [s]."""
+    return not collision and not goal and any(end - t >= window - 1e-9 for t in since.values())
+
+
 def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     """One episode of ``driver`` in ``env`` from ``seed``; returns its row (see the module)."""
     from risk_env.highway.adapter import reached
@@ -114,6 +144,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     manoeuvres = 0
     times, speeds = [float(base.time)], [float(base.vehicle.speed)]
     off_road = 0
+    inside: dict[int, float] = {}
     done, kind = False, ""
     while not done:
         known = built_problems()
@@ -132,6 +163,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         times.append(float(base.time))
         speeds.append(float(base.vehicle.speed))
         off_road += not base.vehicle.on_road
+        inside = standing_inside(base, inside)
         done = terminated or truncated
         if base.vehicle.crashed and not kind:
             kind = crash_kind(base, before)
@@ -149,6 +181,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "goal": goal,
         "timeout": not crashed and not goal,
         "deadlock": deadlocked(np.array(times), np.array(speeds), crashed, goal),
+        "jammed": jammed(inside, times[-1], crashed, goal),
         "final_speed": speeds[-1],
         "off_road": off_road > 0,
         "off_road_steps": off_road,

@@ -27,7 +27,7 @@ RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout",
 """The per-episode outcomes counted, each with its rate and Wilson interval."""
 EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
-    "vehicle_into_ego", "goal", "timeout", "deadlock", "off_road", "off_road_steps", "final_speed",
+    "vehicle_into_ego", "goal", "timeout", "deadlock", "jammed", "off_road", "off_road_steps", "final_speed",
     "risk_mean", "fallbacks", "manoeuvres", "reset_cpu_s", "spent_risk", "solve_ms_median", "cpu_ms_median",
     "build_steps", "gate_steps",
 )  # fmt: skip
@@ -66,6 +66,8 @@ def summarise(
         "episodes_with_fallback": int(np.sum(fallbacks > 0)),
         "manoeuvre_steps": int(sum(r.get("manoeuvres", 0) for r in rows)),
         "risk_mean": float(risk.mean()) if risk.size else 0.0,
+        "jammed": int(sum(bool(r.get("jammed", False)) for r in rows)),
+        "deadlock_jammed": int(sum(bool(r["deadlock"] and r.get("jammed", False)) for r in rows)),
     }
     for kind, times in (("cpu", cpu), ("solve", wall)):
         out |= {
@@ -138,7 +140,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f" predictor {args.predictor[0]}). The MPCs' wall-time cap per step: {cap}. Wall time"
         f" {wall:.0f} s on {args.workers or 'all'} worker(s); load average at the end (1 / 5 / 15"
         f" min): {load} on {os.cpu_count()} cores. Rates: % [Wilson 95 % interval]. Deadlock: no"
-        " collision, no goal, the ego stopped (< 0.1 m/s) over the last 10 s. Left the road: off every"
+        " collision, no goal, the ego stopped (< 0.1 m/s) over the last 10 s; jammed: no collision, no goal,"
+        " another vehicle stopped inside the junction over the last 10 s. Left the road: off every"
         " lane of the map at some step.",
         "",
     ]
@@ -147,14 +150,15 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
     lines += [
         "",
         "| agent | N | collisions | ego drove into a vehicle | a vehicle drove into the ego | goal |"
-        " timeout | deadlocks | left the road | time to goal [s] |",
-        "| " + " | ".join(["---"] * 10) + " |",
+        " timeout | deadlocks | timeouts jammed (of which deadlocks) | left the road | time to goal [s] |",
+        "| " + " | ".join(["---"] * 11) + " |",
     ]
     for s in summary:
         lines.append(
             f"| {_who(s)} | {s['episodes']} | {_ci(s, 'collision')} | {_ci(s, 'ego_into_vehicle')} |"
             f" {_ci(s, 'vehicle_into_ego')} | {_ci(s, 'goal')} | {100 * s['timeout_rate']:.1f}% |"
-            f" {s['deadlock']} | {s['off_road']} | {_f(s['time_to_goal_s'])} |"
+            f" {s['deadlock']} | {s['jammed']} ({s['deadlock_jammed']}) | {s['off_road']} |"
+            f" {_f(s['time_to_goal_s'])} |"
         )
     mpcs = [s for s in summary if s["agent"] not in REFERENCES]
     if not mpcs:
@@ -201,7 +205,7 @@ def write_csvs(folder: Path, prefix: str, summary: list[dict[str, Any]], rows: l
             timed = {f"{k}_ms_median": r[f"{k}_times"][~r["built"]] for k in ("solve", "cpu")}
             medians = {k: 1e3 * float(np.median(t)) if t.size else "" for k, t in timed.items()}
             medians["build_steps"] = int(r["built"].sum())
-            writer.writerow({k: r[k] for k in EPISODE_FIELDS if k not in medians} | medians)
+            writer.writerow({k: r.get(k, "") for k in EPISODE_FIELDS if k not in medians} | medians)
 
 
 def gate_text(args: Any) -> str:

@@ -18,7 +18,7 @@ pytest.importorskip("highway_env")
 
 from benchmarks import highway_frontier, highway_intersection  # noqa: E402
 from benchmarks.highway_agents import HighwayAgent, make_driver, resolve  # noqa: E402
-from benchmarks.highway_episodes import ENV_DEFAULTS, deadlocked, make_env  # noqa: E402
+from benchmarks.highway_episodes import ENV_DEFAULTS, deadlocked, jammed, make_env, standing_inside  # noqa: E402
 from benchmarks.highway_frontier import beats, draw_frontier  # noqa: E402
 from benchmarks.sampled_rows import wilson  # noqa: E402
 
@@ -163,9 +163,10 @@ def test_an_episode_records_every_column(tmp_path):
     assert np.isnan(rows["idm"]["cpu_ms_median"])
     text = (tmp_path / "intersection.md").read_text()
     assert "episode budget 0.05, no per-step bound" in text and "solve CPU ms median / p95 / max" in text
-    assert "| deadlocks | left the road |" in text and "duration 1.5 s" in text
+    assert "| deadlocks | timeouts jammed (of which deadlocks) | left the road |" in text
+    assert "duration 1.5 s" in text and s["jammed"] == 0 == s["deadlock_jammed"]
     episodes = (tmp_path / "intersection_episodes.csv").read_text().splitlines()
-    assert len(episodes) == 4 and "deadlock" in episodes[0] and "cpu_ms_median" in episodes[0]
+    assert len(episodes) == 4 and "deadlock,jammed" in episodes[0] and "cpu_ms_median" in episodes[0]
     assert "steps that built an NLP" in text
 
 
@@ -215,6 +216,28 @@ def test_deadlocks_from_a_synthetic_record():
     blip[times == 8.0] = 0.2  # it crept forward once
     assert not deadlocked(times, blip, collision=False, goal=False)
     assert deadlocked(times, -stopped_from(1.0), collision=False, goal=False)  # rolling back slowly
+
+
+def test_a_jam_is_a_vehicle_standing_in_the_junction_for_the_last_ten_seconds():
+    """standing_inside keeps, step by step, since when each other vehicle has stood on a junction lane
+    (from an ``ir*`` node); it drops one that moves or leaves; jammed asks for 10 s of it."""
+    from types import SimpleNamespace as Car
+
+    ego = Car(lane_index=("ir0", "il1", 0), speed=0.0)
+    inside = Car(lane_index=("ir1", "il3", 0), speed=0.0)
+    waiting = Car(lane_index=("o2", "ir2", 0), speed=0.0)  # stopped before the junction: no jam
+    base = Car(vehicle=ego, road=Car(vehicles=[ego, inside, waiting]), time=2.0)
+    since = standing_inside(base, {})
+    assert since == {id(inside): 2.0}  # the ego and the one outside are not counted
+    base.time = 12.0
+    since = standing_inside(base, since)
+    assert since == {id(inside): 2.0}
+    assert jammed(since, 12.0, collision=False, goal=False)
+    assert not jammed(since, 11.5, collision=False, goal=False)  # 9.5 s
+    assert not jammed(since, 12.0, collision=True, goal=False)
+    assert not jammed(since, 12.0, collision=False, goal=True)
+    inside.speed = -0.3  # rolling back: moving
+    assert standing_inside(base, since) == {}
 
 
 # ------------------------------------------------------------------------------------ bad input
