@@ -32,9 +32,11 @@ junction, each step, whether the ego can cross all of it first:
   line stays closed: the MPC brakes as hard as it can, and an ego that stopped past the line is held
   where it is until the gate opens: the virtual object moved :data:`HOLD_GAP` ahead of its disc as
   the hold begins, then never behind the disc, but no farther (an ego that creeps into it gets no new
-  gap, so the slow approach's speed falls to 0). (Committing once the ego's centre passed the
-  virtual object, measured on seeds 0-9, let soft plans push through it into the junction: 1 and 3
-  collisions for the RMPC and SMPC.)
+  gap, so the slow approach's speed falls to 0). With ``hard_stop`` the adapter applies no more than
+  that speed either (:meth:`JunctionGate.allowed_speed`): the slow approach bounds the plan's
+  reference, the hard stop what is applied, a soft plan's or a fallback manoeuvre's. (Committing
+  once the ego's centre passed the virtual object, measured on seeds 0-9, let soft plans push
+  through it into the junction: 1 and 3 collisions for the RMPC and SMPC.)
 
 The virtual object is predicted standing still with the spread :data:`VIRTUAL_SIGMA`, truncated at
 :data:`VIRTUAL_HALF` (:class:`GatePredictor`): its risk is exactly 0 while the ego's disc stays
