@@ -276,29 +276,42 @@ def test_the_adapter_plans_against_the_virtual_object_which_is_not_scored():
         IntersectionAdapter(env, Stub, gate="on")
 
 
+class SpeedStub:
+    """A lane agent that asks for ``speed`` [m/s] straight on and records the speed limits it is handed."""
+
+    speed = 6.0
+
+    def __init__(self, scenario, object_slots, predictor=None):
+        self.speed_limit, self.limits = math.inf, []
+
+    def predict(self, obs, episode_start=None, deterministic=True):
+        self.limits.append(self.speed_limit)
+        return np.array([self.speed, 0.0]), None
+
+
+def shut_gate(settings, make_agent):
+    """``(env, adapter, first observation)``: an intersection episode (seed 3) whose adapter, gated by
+    ``settings``, drives ``make_agent``'s agents with a gate that shuts whenever it judges."""
+    from risk_env.highway import IntersectionAdapter, make_intersection_env
+
+    env = make_intersection_env()
+    adapter = IntersectionAdapter(env, make_agent, slots=3, gate=settings)
+    obs, _ = env.reset(seed=3)
+    adapter.reset()
+    adapter.gate.margin = 1e9
+    return env, adapter, obs
+
+
 def test_a_slow_approach_reaches_the_agents_speed_limit_and_the_command():
     """With the gate shut and ``slow_approach``, each step the adapter hands the lane's agent the
     gate's stop speed, which falls as the ego comes on; without the switch, no cap."""
     pytest.importorskip("highway_env")
     from benchmarks import highway_intersection
     from benchmarks.highway_agents import gate_settings
-    from risk_env.highway import IntersectionAdapter, make_intersection_env
     from risk_env.highway.gate_judge import GateSettings
 
-    class Stub:
-        def __init__(self, scenario, object_slots, predictor=None):
-            self.speed_limit, self.limits = math.inf, []
-
-        def predict(self, obs, episode_start=None, deterministic=True):
-            self.limits.append(self.speed_limit)
-            return np.array([6.0, 0.0]), None
-
     for slow in (True, False):
-        env = make_intersection_env()
-        adapter = IntersectionAdapter(env, Stub, slots=3, gate=GateSettings(slow_approach=slow))
-        obs, _ = env.reset(seed=3)
-        adapter.reset()
-        adapter.gate.margin = 1e9  # shut whenever it judges
+        env, adapter, obs = shut_gate(GateSettings(slow_approach=slow), SpeedStub)
         for _ in range(4):
             obs, *_ = env.step(adapter.predict(obs)[0])
         limits = adapter._agent_for(adapter.lane).limits
@@ -391,23 +404,14 @@ def test_the_adapter_applies_the_hard_stops_speed():
     pytest.importorskip("highway_env")
     from benchmarks import highway_intersection
     from benchmarks.highway_agents import gate_settings
-    from risk_env.highway import IntersectionAdapter, make_intersection_env
     from risk_env.highway.gate_judge import GateSettings
 
-    class Stub:
-        def __init__(self, scenario, object_slots, predictor=None):
-            self.speed_limit = math.inf
-
-        def predict(self, obs, episode_start=None, deterministic=True):
-            return np.array([10.0, 0.0]), None
+    class FullSpeed(SpeedStub):
+        speed = 10.0
 
     commands = {}
     for hard in (True, False):
-        env = make_intersection_env()
-        adapter = IntersectionAdapter(env, Stub, slots=3, gate=GateSettings(hard_stop=hard))
-        obs, _ = env.reset(seed=3)
-        adapter.reset()
-        adapter.gate.margin = 1e9  # shut whenever it judges
+        env, adapter, obs = shut_gate(GateSettings(hard_stop=hard), FullSpeed)
         commands[hard] = []
         for _ in range(3):
             action = adapter.predict(obs)[0]
