@@ -181,7 +181,19 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
         gate=gate_settings(args),
         **body_overrides(args),
+        **ego_overrides(args),
     )
+
+
+def ego_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The adapter's scenario overrides for the ego from ``--v-ref`` and ``--ego-accel`` (the lanes'
+    $v_{max}$ rises to a higher $v_{ref}$)."""
+    from risk_env.highway.adapter import ADAPTER_DEFAULTS
+
+    v_ref = getattr(args, "v_ref", ADAPTER_DEFAULTS["v_ref"])
+    overrides = {"v_ref": v_ref, "v_max": max(ADAPTER_DEFAULTS["v_max"], v_ref)}
+    accel = getattr(args, "ego_accel", None)  # None: the scenario's
+    return overrides if accel is None else overrides | {"accel_max": accel}
 
 
 def body_overrides(args: argparse.Namespace) -> dict[str, Any]:
@@ -299,6 +311,12 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="while the gate is closed the applied speed is clipped so too: nothing passes the line",
     )
+    parser.add_argument(
+        "--gate-approach-braking",
+        type=cli.fraction,
+        default=defaults.approach_braking,
+        help="the share of the ego's braking the slow approach and the hard stop plan with (0.5: half)",
+    )
 
 
 def gate_settings(args: Any) -> Any:
@@ -316,4 +334,5 @@ def gate_settings(args: Any) -> Any:
         given_ego=getattr(args, "gate_given_ego", defaults.given_ego),
         slow_approach=getattr(args, "gate_slow_approach", defaults.slow_approach),
         hard_stop=getattr(args, "gate_hard_stop", defaults.hard_stop),
+        approach_braking=getattr(args, "gate_approach_braking", defaults.approach_braking),
     )

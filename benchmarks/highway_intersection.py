@@ -65,6 +65,7 @@ from benchmarks.highway_tables import markdown, summarise, write_csvs
 from benchmarks.sweep import run_sweep
 from risk_env.highway.adapter import ADAPTER_DEFAULTS
 from risk_env.prediction.predictors import PREDICTOR_NAMES
+from risk_env.scenario.parts import Ego
 from risk_env.scenario.scenario import SEVERITY_NAMES, UNCERTAINTY_PRESETS
 
 FILES = ("intersection.csv", "intersection.md", "intersection_episodes.csv")
@@ -152,6 +153,18 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         default=ADAPTER_DEFAULTS["object_radius"],
         help="radius [m] of the other vehicles' discs in the MPCs' rows (the score keeps 2 m): two 2 m"
         " discs make a car passing in the lane beside, 4 m away, a collision",
+    )
+    parser.add_argument(
+        "--v-ref",
+        type=cli.positive_float,
+        default=ADAPTER_DEFAULTS["v_ref"],
+        help="the MPCs' reference speed v_ref [m/s] (also the gate's crossing speed; v_max rises to it)",
+    )
+    parser.add_argument(
+        "--ego-accel",
+        type=cli.positive_float,
+        default=Ego.accel_max,
+        help="the ego's largest acceleration and braking in the MPCs and the gate [m/s^2]",
     )
     parser.add_argument(
         "--car-discs",

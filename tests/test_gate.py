@@ -224,6 +224,9 @@ def test_bad_values_are_named():
         JunctionGate(Crossing(), reach=4.0, accel=3.0, half_length=2.5, dt=DT, margin=-1.0)
     with pytest.raises(GateError, match="threshold"):
         JunctionGate(Crossing(), reach=4.0, accel=3.0, half_length=2.5, dt=DT, threshold=2.0)
+    for share in (0.0, 1.5, math.nan):
+        with pytest.raises(GateError, match="approach_braking"):
+            JunctionGate(Crossing(), reach=4.0, accel=3.0, half_length=2.5, dt=DT, approach_braking=share)
     with pytest.raises(GateError, match="inner must be a Predictor"):
         GatePredictor("lane")
     assert issubclass(GateError, ValueError)
@@ -398,6 +401,22 @@ def test_a_hard_stop_clips_the_applied_speed_at_the_line():
     assert plain.last.closed and plain.allowed_speed(9.0) == 9.0
 
 
+def test_the_approach_braking_share_sets_the_lines_speed():
+    """``approach_braking`` b: the slow approach's and the hard stop's speed is sqrt(2 b a d), so the
+    default 0.5 keeps sqrt(a d) and 1 (the latest full stop) is sqrt(2) times faster."""
+    speeds = {}
+    for share in (0.5, 1.0):
+        g = gate()
+        g.hard_stop = g.slow_approach = True
+        g.approach_braking = share
+        g.step(30.0, 5.0, crossing_at(60.0, -30.0, 10.0))
+        stop = g.virtual()[0] - VIRTUAL_HALF - 4.0
+        assert g.last.closed and g.stop_speed() == g.allowed_speed(99.0)
+        speeds[share] = g.stop_speed()
+    assert speeds[0.5] == pytest.approx(math.sqrt(3.0 * (stop - 30.0)))
+    assert speeds[1.0] == pytest.approx(math.sqrt(2.0) * speeds[0.5])
+
+
 def test_the_adapter_applies_the_hard_stops_speed():
     """The adapter clips the agent's speed by the gate (``--gate-hard-stop``): the same agent asking
     for full speed toward a shut gate gets a lower acceleration with the switch than without."""
@@ -421,3 +440,6 @@ def test_the_adapter_applies_the_hard_stops_speed():
     assert all(h < p for h, p in zip(commands[True], commands[False], strict=True))
     assert gate_settings(highway_intersection.parse_args(["--gate-hard-stop"])).hard_stop
     assert not gate_settings(highway_intersection.parse_args([])).hard_stop
+    assert gate_settings(highway_intersection.parse_args([])).approach_braking == 0.5
+    args = highway_intersection.parse_args(["--gate-hard-stop", "--gate-approach-braking", "1"])
+    assert gate_settings(args).approach_braking == 1.0

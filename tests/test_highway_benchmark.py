@@ -108,6 +108,27 @@ def test_the_options_reach_the_mpcs():
     assert lane.predictor is None  # built on the road network at the first episode
 
 
+def test_the_egos_speed_and_acceleration_reach_the_mpcs_and_the_gate():
+    """``--v-ref`` and ``--ego-accel`` set the adapter's scenario (v_max rises to a faster v_ref), which
+    the gate reads for its crossing; the defaults keep the adapter's 8 m/s and the paper's 3 m/s^2."""
+    args = highway_intersection.parse_args(["--v-ref", "9.5", "--ego-accel", "5"])
+    env = make_env(args, "lane")
+    driver = make_driver(resolve("rmpc", "probability", 0.05), env, args, "lane")
+    env.reset(seed=0)
+    driver.reset()
+    ego = driver.base_scenario.ego
+    assert (ego.v_ref, ego.v_max, ego.accel_max) == (9.5, 10.0, 5.0)
+    assert driver.gate.accel == 5.0 and driver.gate.speed_cap <= 9.5
+    rmpc = resolve("rmpc", "probability", 0.05)
+    plain = make_driver(rmpc, env, highway_intersection.parse_args([]), "lane").base_scenario.ego
+    assert (plain.v_ref, plain.accel_max) == (8.0, 3.0)
+    fast = highway_intersection.parse_args(["--v-ref", "12"])
+    assert make_driver(rmpc, env, fast, "lane").base_scenario.ego.v_max == 12.0
+    for bad in (["--v-ref", "0"], ["--ego-accel", "nan"]):
+        with pytest.raises(SystemExit):
+            highway_intersection.parse_args(bad)
+
+
 def test_lane_pieces_reach_the_mpcs_predictor_and_size_their_mode_slots():
     args = highway_intersection.parse_args(["--lane-pieces", "3", "--max-solve-time", "inf"])
     env = make_env(args, "lane")

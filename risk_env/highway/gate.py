@@ -176,6 +176,7 @@ class JunctionGate:
         tolerance: float = 0.0,
         slow_approach: bool = False,
         hard_stop: bool = False,
+        approach_braking: float = 0.5,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -199,6 +200,10 @@ class JunctionGate:
         self.slow_approach = bool(slow_approach)
         """Whether a closed gate caps the agents' reference speed (:meth:`stop_speed`)."""
         self.hard_stop = bool(hard_stop)
+        if not (isinstance(approach_braking, (int, float)) and 0.0 < approach_braking <= 1.0):
+            raise GateError(f"approach_braking must lie in (0, 1], got {approach_braking!r}")
+        self.approach_braking = float(approach_braking)
+        """The share of ``accel`` the slow approach and the hard stop brake with (:meth:`stop_speed`)."""
         """Whether a closed gate clips the applied speed (:meth:`allowed_speed`)."""
         self.clearance = min(self.reach, GATE_CLEARANCE)
         """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
@@ -318,9 +323,10 @@ class JunctionGate:
 
     def stop_speed(self) -> float:
         r"""With :attr:`slow_approach` and the gate closed, the highest speed [m/s] from which half the
-        ego's largest braking stops it where its disc meets the virtual object, $\sqrt{a d}$ ($d$
-        [m] the distance left; 0 past it); else inf. The MPC's horizon has no terminal row: without
-        the cap it comes on at its reference speed until it can no longer stop before the line."""
+        ego's largest braking (:attr:`approach_braking`) stops it where its disc meets the virtual
+        object, $\sqrt{a d}$ ($d$ [m] the distance left; 0 past it); else inf. The MPC's horizon has
+        no terminal row: without the cap it comes on at its reference speed until it can no longer
+        stop before the line."""
         if not (self.slow_approach and self.last.closed):
             return math.inf
         return self._line_speed()
@@ -335,7 +341,8 @@ class JunctionGate:
         return min(v, self._line_speed())
 
     def _line_speed(self) -> float:
-        return math.sqrt(self.accel * max(self._held - self._touch(), 0.0))
+        share = 2.0 * self.approach_braking * self.accel
+        return math.sqrt(share * max(self._held - self._touch(), 0.0))
 
     def _touch(self) -> float:
         """Route arc length [m] where the virtual object would touch the ego's disc now."""

@@ -64,12 +64,16 @@ class GateSettings:
     by the gate, and, while it is open, by the agents' predictor too."""
     slow_approach: bool = False
     r"""Whether, while the gate is closed, the agents' reference speed is capped at $\sqrt{a d}$, from
-    which half the ego's largest braking $a$ stops it at the stop line $d$ ahead
+    which half the ego's largest braking $a$ stops it at the stop line $d$ ahead (the share:
+    :attr:`approach_braking`)
     (:meth:`~risk_env.highway.gate.JunctionGate.stop_speed`)."""
     hard_stop: bool = False
     r"""Whether, while the gate is closed, the *applied* speed is clipped at that $\sqrt{a d}$ too, so that
     neither a soft plan nor a fallback manoeuvre carries the ego past the stop line
     (:meth:`~risk_env.highway.gate.JunctionGate.allowed_speed`)."""
+    approach_braking: float = 0.5
+    r"""The share $b$ of the ego's largest braking $a$ that the slow approach and the hard stop brake with:
+    their speed is $\sqrt{2 b a d}$ (0.5: $\sqrt{a d}$; 1: the latest full stop), in (0, 1]."""
 
 
 NEAR_STEPS = 6
