@@ -200,11 +200,11 @@ class JunctionGate:
         self.slow_approach = bool(slow_approach)
         """Whether a closed gate caps the agents' reference speed (:meth:`stop_speed`)."""
         self.hard_stop = bool(hard_stop)
+        """Whether a closed gate clips the applied speed (:meth:`allowed_speed`)."""
         if not (isinstance(approach_braking, (int, float)) and 0.0 < approach_braking <= 1.0):
             raise GateError(f"approach_braking must lie in (0, 1], got {approach_braking!r}")
         self.approach_braking = float(approach_braking)
         """The share of ``accel`` the slow approach and the hard stop brake with (:meth:`stop_speed`)."""
-        """Whether a closed gate clips the applied speed (:meth:`allowed_speed`)."""
         self.clearance = min(self.reach, GATE_CLEARANCE)
         """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
         the ego's centre has cleared a point)."""
