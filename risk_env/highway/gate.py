@@ -341,8 +341,8 @@ class JunctionGate:
         return min(v, self._line_speed())
 
     def _line_speed(self) -> float:
-        share = 2.0 * self.approach_braking * self.accel
-        return math.sqrt(share * max(self._held - self._touch(), 0.0))
+        braking = self.approach_braking * self.accel  # v^2 = 2 b a d
+        return math.sqrt(2.0 * braking * max(self._held - self._touch(), 0.0))
 
     def _touch(self) -> float:
         """Route arc length [m] where the virtual object would touch the ego's disc now."""
