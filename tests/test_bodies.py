@@ -16,6 +16,7 @@ import risk_env  # noqa: F401  (registers RiskCrossing-v0)
 from agents import RMPC, SMPC
 from risk_env import Scenario, make_estimator, predict_array
 from risk_env import observation as ob
+from risk_env.models.ops import NUMPY
 from risk_env.prediction.belief import Belief
 from risk_env.risk.bodies import BodyRisk, cover_radius, moved_belief, moved_draws, moved_ego, stretched
 from risk_env.scenario.parts import disc_offsets
@@ -288,3 +289,76 @@ def test_monte_carlo_draws_move_with_the_objects_discs_at_every_step():
     )
     assert np.allclose(est.risk(ego, b, draws=draws), pairs)
     assert pairs.max() > 0
+
+
+def exact_and_worst(epsilon: float = 0.025) -> tuple[Scenario, BodyRisk, BodyRisk]:
+    s = Scenario.preset("low", severity="probability", risk_tolerance=epsilon, **BODIES)
+    return s, make_estimator("exact", s), make_estimator("worst_case", s)
+
+
+def smpc_row(exact: BodyRisk, worst: BodyRisk, ego: np.ndarray, b: Belief, epsilon: float) -> float:
+    r"""The SMPC's risk row on one object at one stage (:meth:`agents.mpc.smpc.SMPC._margin`):
+    $\max(d - r, (\epsilon - R) / \mathrm{scale})$ with the worst case's clearance and the solver's $R$."""
+    clearance = float(worst.distance(ego, b)) - worst.radius
+    margin = (epsilon - float(exact.solver_risk(ca.DM(ego), b))) / exact.severity.scale
+    return max(clearance, margin)
+
+
+def test_a_car_passing_in_the_next_lane_at_an_angle_costs_nothing():
+    """The exit lane of an intersection episode: the ego, turned 0.22 rad off its lane, passes a
+    car in the next lane. No position the belief allows touches it (every ego disc clears the
+    car's capsule by 0.16 m), yet the capsules' bounding box, widened by the ego's turn, holds a
+    third of the car's mass: the charged risk is 0, not the box's 0.32, and the SMPC's row, met by
+    the clearance, keeps its promise R <= epsilon."""
+    _, exact, worst = exact_and_worst()
+    ego = np.array([-31.063, -1.061, 2.919, 6.652])
+    b = Belief(-27.235, 2.0, 0.0, 5.857, 0.371, 0.2, 1.25, 1.118, 0.5, 4.243, 7.871, frame=0.0)
+    assert float(exact.capsule_clearance(ego, b)) == pytest.approx(0.162, abs=1e-3)
+    assert float(exact.capsule_clearance(ego, b)) == pytest.approx(
+        float(worst.distance(ego, b)) - worst.radius
+    )
+    assert float(exact._boxed(ego, b, NUMPY, gated=False)) > 0.3
+    assert float(exact.solver_risk(ca.DM(ego), b)) > 0.3  # the solver's smooth bound stays the box's
+    assert float(exact.risk(ego, b)) == 0.0 and exact.risk_one(tuple(ego), b) == 0.0
+    X = ca.SX.sym("x", 4)
+    assert float(ca.Function("r", [X], [exact.casadi_risk(X, b)])(ego)) == 0.0
+    assert smpc_row(exact, worst, ego, b, 0.025) > 0
+    closer = ego + np.array([0.0, 0.5, 0.0, 0.0])  # 0.5 m nearer: the discs may touch, the box counts
+    assert float(exact.capsule_clearance(closer, b)) < 0
+    assert float(exact.risk(closer, b)) == pytest.approx(float(exact._boxed(closer, b, NUMPY, gated=False)))
+    assert float(exact.risk(closer, b)) > 0.3
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(-9, 9),
+    st.floats(-9, 9),
+    st.floats(-math.pi, math.pi),
+    st.floats(-math.pi, math.pi),
+    st.floats(-math.pi, math.pi),
+    st.floats(0.05, 2.0),
+    st.floats(0.0, 0.5),
+)
+def test_the_smpcs_row_keeps_the_charged_risk_within_its_tolerance(x, y, th_e, th_o, frame, half, epsilon):
+    """Wherever the SMPC's row holds, the risk it is charged (the env's and the agent's numpy, scalar
+    and CasADi forms alike) is at most epsilon; the estimator's margin is the same row; the risk is 0
+    wherever the worst case's clearance is positive, and is the capsules' box elsewhere."""
+    _, exact, worst = exact_and_worst()
+    ego = np.array([x, y, th_e, 5.0])
+    b = Belief(0.0, 0.0, th_o, 5.0, 0.4, 0.3, 1.0, half, 0.6 * half, 4.0, 6.0, frame=frame)
+    risk = float(exact.risk(ego, b))
+    assert exact.risk_one(tuple(ego), b) == pytest.approx(risk, rel=1e-9, abs=1e-12)
+    X = ca.SX.sym("x", 4)
+    assert float(ca.Function("r", [X], [exact.casadi_risk(X, b)])(ego)) == pytest.approx(
+        risk, rel=1e-9, abs=1e-12
+    )
+    row = smpc_row(exact, worst, ego, b, epsilon)
+    if row >= 0:
+        assert risk <= epsilon + 1e-12
+    margin = float(ca.Function("m", [X], [exact.casadi_margin(X, b, epsilon)])(ego))
+    assert margin == pytest.approx(row, rel=1e-9, abs=1e-9)
+    clearance = float(worst.distance(ego, b)) - worst.radius
+    if clearance > 0:
+        assert risk == 0.0
+    else:
+        assert risk == pytest.approx(float(exact.solver_risk(ca.DM(ego), b)), rel=1e-9, abs=1e-15)

@@ -52,9 +52,11 @@ class SMPC(PathFollowingMPC):
     rule. The clearance $d - r$ is the distance $d$ from the ego centre to where the object may be,
     minus $r = r_e + r_o$: to the truncation box for the exact risk; to the draws for Monte Carlo, as a
     smooth soft minimum of the distances, below the nearest by at most :data:`CLEARANCE_SOFTNESS`
-    $\cdot \log J$ (0.31 m for $J = 500$). $R$ vanishes wherever the clearance is positive, so this is
-    $R \le \epsilon$; but $R$'s gradient vanishes with $R$, and $R \le 0$ has no interior, which stalls
-    an interior-point solver, while the clearance keeps a gradient (and a truncated Gaussian puts ~1e-20
+    $\cdot \log J$ (0.31 m for $J = 500$). $R$ vanishes wherever the clearance is positive (for
+    bodies of several discs by the estimator's gate,
+    :meth:`~risk_env.risk.bodies.BodyRisk.capsule_clearance`), so this is $R \le \epsilon$; but
+    $R$'s gradient vanishes with $R$, and $R \le 0$ has no interior, which stalls an interior-point
+    solver, while the clearance keeps a gradient (and a truncated Gaussian puts ~1e-20
     of mass near a box edge ten standard deviations out: the unguarded exact constraint would let the
     plan into the box at $\epsilon = 0$). So at $\epsilon = 0$ the exact SMPC is the RMPC's box
     constraint, as it must be ($P = 0$ off the box), and the Monte Carlo SMPC keeps off every draw (it

@@ -23,7 +23,14 @@ the two discs. The bodies touch when any pair does, so
   (an upper bound, cheaper than one disc's quadrature; the nine pairs' quadratures made the
   SMPC's NLP too large to build). For cars in parallel lanes the box is the capsules' sum
   itself but at its four rounded corners; crossing at right angles it is $2(a_e + a_o + r)$ wide
-  where the cars' rectangles touch within $L + W$.
+  where the cars' rectangles touch within $L + W$. Where every ego disc clears the object's
+  capsule box (the worst case's clearance is positive, :meth:`BodyRisk.capsule_clearance`) no
+  position the belief allows touches the ego, so the risk is 0 there, not the box's: the box's
+  corners, and its growth with the ego's heading off the belief's frame, may hold much of the
+  object's mass beside a car that cannot be hit (a third of it for an ego turned 0.2 rad past a
+  car in the next lane). The SMPC's row, $\max(\text{clearance}, (\epsilon - R) / \mathrm{scale})
+  \ge 0$, is this gated $R \le \epsilon$; the solver's smooth $R$ (:meth:`BodyRisk.solver_risk`) is
+  the box's alone.
 
 Either way a plan that keeps the bound below $\epsilon$ keeps the bodies' risk below $\epsilon$.
 
@@ -43,6 +50,7 @@ import numpy as np
 from risk_env.models.frame import to_frame
 from risk_env.models.ops import CASADI, MATH, NUMPY, Ops
 from risk_env.prediction.belief import Belief
+from risk_env.risk.disc import signed_box_distance
 from risk_env.risk.estimator import RiskEstimator, ego_parts
 from risk_env.risk.quadrature import GEOMETRY_FLOOR
 from risk_env.scenario.scenario import Scenario
@@ -198,11 +206,29 @@ class BodyRisk(RiskEstimator):
             out = ops.maximum(out, value) if self.worst else out + value
         return out
 
-    def _boxed(self, ego: Any, belief: Belief, ops: Ops) -> Any:
-        """The exact expectation's bound: the capsules' box probability times $E[s]$."""
+    def _boxed(self, ego: Any, belief: Belief, ops: Ops, gated: bool = True) -> Any:
+        """The exact expectation's bound: the capsules' box probability times $E[s]$, and 0 where
+        every ego disc misses the object's capsule (:meth:`capsule_clearance` > 0: the bodies cannot
+        touch, while the box's corners may hold mass); ``gated=False``: the smooth product alone."""
         p = capsule_box_probability(ego, belief, *self.half_lengths, self.radius, ops)
         _, _, th, v = ego_parts(ego)
-        return p * self.severity.expected(v, th, belief, ops)
+        value = p * self.severity.expected(v, th, belief, ops)
+        if not gated:
+            return value
+        return ops.where(self.capsule_clearance(ego, belief, ops) > 0.0, 0.0 * value, value)
+
+    def capsule_clearance(self, ego: Any, belief: Belief, ops: Ops = NUMPY) -> Any:
+        """The least signed distance [m] from an ego disc's centre to the object's capsule box
+        (:func:`stretched`), minus $r_e + r_o$: the worst case's clearance, > 0 where no object
+        position the belief allows touches the ego."""
+        capsule = stretched(belief, self.half_lengths[1])
+        out = None
+        for a in self.ego_offsets:
+            x, y, _, _ = ego_parts(moved_ego(ego, a))
+            dx, dy = to_frame(x - capsule.x, y - capsule.y, capsule.frame, ops)
+            d = signed_box_distance(dx, dy, capsule.half_x, capsule.half_y, ops)
+            out = d if out is None else ops.minimum(out, d)
+        return out - self.radius
 
     def _risk(self, ego: Any, belief: Belief, ops: Ops, **kwargs: Any) -> Any:
         if self.boxed:
@@ -236,7 +262,8 @@ class BodyRisk(RiskEstimator):
 
     def casadi_margin(self, ego: ca.SX, belief: Belief, epsilon: Any, **kwargs: Any) -> ca.SX:
         r"""$\ge 0$ exactly when the bodies' risk meets $\epsilon$: the least of the pairs' worst-case
-        margins, or $(\epsilon - \sum R) / \mathrm{scale}$ with the inner estimator's solver risk."""
+        margins; the exact box's $\max(\text{clearance}, (\epsilon - R) / \mathrm{scale})$ with its
+        ungated $R$; else $(\epsilon - \sum R) / \mathrm{scale}$ with the inner estimator's solver risk."""
         if self.worst:
             pairs = self.pairs(ego, belief)
             margins = [self.inner.casadi_margin(e, b, epsilon, **kwargs) for e, b, _ in pairs]
@@ -244,6 +271,9 @@ class BodyRisk(RiskEstimator):
             for m in margins[1:]:
                 out = ca.fmin(out, m)
             return out
+        if self.boxed:  # the gate of :meth:`_boxed`: R <= epsilon or no ego disc near the capsule
+            margin = (epsilon - self.solver_risk(ego, belief)) / self.severity.scale
+            return ca.fmax(self.capsule_clearance(ego, belief, CASADI), margin)
         if hasattr(self.inner, "solver_risk"):
             return (epsilon - self.solver_risk(ego, belief)) / self.severity.scale
         return (epsilon - self.casadi_risk(ego, belief, **kwargs)) / self.severity.scale
@@ -252,7 +282,7 @@ class BodyRisk(RiskEstimator):
         """The solver's bound on the bodies' risk: the exact one's box (:meth:`_risk`), else the inner
         estimator's solver risk summed over the pairs (module docstring)."""
         if self.boxed:
-            return self._boxed(ego, belief, CASADI)
+            return self._boxed(ego, belief, CASADI, gated=False)
         values = [self.inner.solver_risk(e, b) for e, b, _ in self.pairs(ego, belief)]
         return self._combine(values, CASADI)
 
