@@ -27,8 +27,12 @@ stopped (speed below :data:`STOPPED_SPEED`) at every step's end over its last
 **Jammed** (:func:`jammed`): at an episode's end without a collision or the goal, some other vehicle
 had stood inside the junction (on a lane from an ``ir*`` node, speed below :data:`STOPPED_SPEED`) at
 every step's end over the last :data:`DEADLOCK_WINDOW` seconds: highway-env's traffic locked in the
-junction (its yielding rule lets two vehicles each wait for the other), which no driver can cross
-while it lasts.
+junction (its yielding rule lets two vehicles each wait for the other, or two of them crashed into
+each other there), which no driver can cross while it lasts.
+
+**Behind a wreck** (:func:`wrecked`): at an episode's end without a collision or the goal, a vehicle
+other than the ego that crashed (into another: the ego did not) stands inside the junction. highway-env
+never clears a wreck, so the junction stays blocked for the rest of the episode, whatever the ego does.
 """
 
 from __future__ import annotations
@@ -130,6 +134,19 @@ def jammed(
     return not collision and not goal and any(end - t >= window - 1e-9 for t in since.values())
 
 
+def wrecked(base: Any, collision: bool, goal: bool) -> bool:
+    """Whether a crashed vehicle other than the ego stands inside the junction (on a lane from an
+    ``ir*`` node) of ``base`` (the unwrapped env at an episode's end, neither ``collision`` nor ``goal``)."""
+    from risk_env.highway.gate import JUNCTION_PREFIX
+
+    if collision or goal:
+        return False
+    return any(
+        v is not base.vehicle and v.crashed and str(v.lane_index[0]).startswith(JUNCTION_PREFIX)
+        for v in base.road.vehicles
+    )
+
+
 def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
     """One episode of ``driver`` in ``env`` from ``seed``; returns its row (see the module)."""
     from risk_env.highway.adapter import reached
@@ -182,6 +199,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "timeout": not crashed and not goal,
         "deadlock": deadlocked(np.array(times), np.array(speeds), crashed, goal),
         "jammed": jammed(inside, times[-1], crashed, goal),
+        "wrecked": wrecked(base, crashed, goal),
         "final_speed": speeds[-1],
         "off_road": off_road > 0,
         "off_road_steps": off_road,

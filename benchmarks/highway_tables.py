@@ -27,7 +27,8 @@ RATES = ("collision", "ego_into_vehicle", "vehicle_into_ego", "goal", "timeout",
 """The per-episode outcomes counted, each with its rate and Wilson interval."""
 EPISODE_FIELDS = (
     "agent", "predictor", "seed", "steps", "time_s", "collision", "ego_into_vehicle",
-    "vehicle_into_ego", "goal", "timeout", "deadlock", "jammed", "off_road", "off_road_steps", "final_speed",
+    "vehicle_into_ego", "goal", "timeout", "deadlock", "jammed", "wrecked", "off_road", "off_road_steps",
+    "final_speed",
     "risk_mean", "fallbacks", "manoeuvres", "reset_cpu_s", "spent_risk", "solve_ms_median", "cpu_ms_median",
     "build_steps", "gate_steps",
 )  # fmt: skip
@@ -69,6 +70,10 @@ def summarise(
         "jammed": int(sum(bool(r.get("jammed", False)) for r in rows)),
         "deadlock_jammed": int(sum(bool(r["deadlock"] and r.get("jammed", False)) for r in rows)),
     }
+    # episodes run before the count existed (resumed chunks) leave it unknown, never 0
+    known = all("wrecked" in r for r in rows)
+    out["wrecked"] = int(sum(bool(r["wrecked"]) for r in rows)) if known else None
+    out["deadlock_wrecked"] = int(sum(bool(r["deadlock"] and r["wrecked"]) for r in rows)) if known else None
     for kind, times in (("cpu", cpu), ("solve", wall)):
         out |= {
             f"{kind}_ms_median": _stat(times, 50),
@@ -108,6 +113,11 @@ def _f(x: Any, digits: int = 1) -> str:
     return "-" if x == "" or x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.{digits}f}"
 
 
+def _wrecks(s: dict[str, Any]) -> str:
+    """``wrecked (deadlock_wrecked)``, or "n/a" where the episodes did not count them."""
+    return "n/a" if s.get("wrecked") is None else f"{s['wrecked']} ({s['deadlock_wrecked']})"
+
+
 def _ci(s: dict[str, Any], key: str) -> str:
     return f"{100 * s[f'{key}_rate']:.1f}% [{100 * s[f'{key}_ci_low']:.1f}, {100 * s[f'{key}_ci_high']:.1f}]"
 
@@ -141,7 +151,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f" {wall:.0f} s on {args.workers or 'all'} worker(s); load average at the end (1 / 5 / 15"
         f" min): {load} on {os.cpu_count()} cores. Rates: % [Wilson 95 % interval]. Deadlock: no"
         " collision, no goal, the ego stopped (< 0.1 m/s) over the last 10 s; jammed: no collision, no goal,"
-        " another vehicle stopped inside the junction over the last 10 s. Left the road: off every"
+        " another vehicle stopped inside the junction over the last 10 s; behind a wreck: no collision, no"
+        " goal, a vehicle that crashed into another stands inside the junction. Left the road: off every"
         " lane of the map at some step.",
         "",
     ]
@@ -150,14 +161,15 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
     lines += [
         "",
         "| agent | N | collisions | ego drove into a vehicle | a vehicle drove into the ego | goal |"
-        " timeout | deadlocks | timeouts jammed (of which deadlocks) | left the road | time to goal [s] |",
-        "| " + " | ".join(["---"] * 11) + " |",
+        " timeout | deadlocks | timeouts jammed (of which deadlocks) | behind a wreck (of which deadlocks) |"
+        " left the road | time to goal [s] |",
+        "| " + " | ".join(["---"] * 12) + " |",
     ]
     for s in summary:
         lines.append(
             f"| {_who(s)} | {s['episodes']} | {_ci(s, 'collision')} | {_ci(s, 'ego_into_vehicle')} |"
             f" {_ci(s, 'vehicle_into_ego')} | {_ci(s, 'goal')} | {100 * s['timeout_rate']:.1f}% |"
-            f" {s['deadlock']} | {s['jammed']} ({s['deadlock_jammed']}) | {s['off_road']} |"
+            f" {s['deadlock']} | {s['jammed']} ({s['deadlock_jammed']}) | {_wrecks(s)} | {s['off_road']} |"
             f" {_f(s['time_to_goal_s'])} |"
         )
     mpcs = [s for s in summary if s["agent"] not in REFERENCES]

@@ -18,7 +18,14 @@ pytest.importorskip("highway_env")
 
 from benchmarks import highway_frontier, highway_intersection  # noqa: E402
 from benchmarks.highway_agents import HighwayAgent, make_driver, resolve  # noqa: E402
-from benchmarks.highway_episodes import ENV_DEFAULTS, deadlocked, jammed, make_env, standing_inside  # noqa: E402
+from benchmarks.highway_episodes import (  # noqa: E402
+    ENV_DEFAULTS,
+    deadlocked,
+    jammed,
+    make_env,
+    standing_inside,
+    wrecked,
+)
 from benchmarks.highway_frontier import beats, draw_frontier  # noqa: E402
 from benchmarks.sampled_rows import wilson  # noqa: E402
 
@@ -184,10 +191,12 @@ def test_an_episode_records_every_column(tmp_path):
     assert np.isnan(rows["idm"]["cpu_ms_median"])
     text = (tmp_path / "intersection.md").read_text()
     assert "episode budget 0.05, no per-step bound" in text and "solve CPU ms median / p95 / max" in text
-    assert "| deadlocks | timeouts jammed (of which deadlocks) | left the road |" in text
+    header = "| timeouts jammed (of which deadlocks) | behind a wreck (of which deadlocks) | left the road |"
+    assert header in text
     assert "duration 1.5 s" in text and s["jammed"] == 0 == s["deadlock_jammed"]
+    assert s["wrecked"] == 0 == s["deadlock_wrecked"]
     episodes = (tmp_path / "intersection_episodes.csv").read_text().splitlines()
-    assert len(episodes) == 4 and "deadlock,jammed" in episodes[0] and "cpu_ms_median" in episodes[0]
+    assert len(episodes) == 4 and "deadlock,jammed,wrecked" in episodes[0] and "cpu_ms_median" in episodes[0]
     assert "steps that built an NLP" in text
 
 
@@ -259,6 +268,30 @@ def test_a_jam_is_a_vehicle_standing_in_the_junction_for_the_last_ten_seconds():
     assert not jammed(since, 12.0, collision=False, goal=True)
     inside.speed = -0.3  # rolling back: moving
     assert standing_inside(base, since) == {}
+
+
+def test_a_wreck_in_the_junction_is_counted_and_an_episode_from_before_the_count_is_unknown():
+    """wrecked: a crashed vehicle other than the ego inside the junction at a timeout; not one on
+    its approach, not the ego, not after a collision or the goal. Rows without the field (chunks
+    resumed from before the count) leave the summary's count unknown ("n/a"), never 0."""
+    from types import SimpleNamespace as Car
+
+    from benchmarks.highway_tables import _wrecks
+
+    ego = Car(lane_index=("o0", "ir0", 0), crashed=False)
+    wreck = Car(lane_index=("ir3", "il0", 0), crashed=True)
+    outside = Car(lane_index=("o2", "ir2", 0), crashed=True)
+    base = Car(vehicle=ego, road=Car(vehicles=[ego, outside]))
+    assert not wrecked(base, collision=False, goal=False)
+    base.road.vehicles.append(wreck)
+    assert wrecked(base, collision=False, goal=False)
+    assert not wrecked(base, collision=True, goal=False) and not wrecked(base, collision=False, goal=True)
+    wreck.crashed = False  # standing, not crashed: a jam, not a wreck
+    assert not wrecked(base, collision=False, goal=False)
+    ego.lane_index, ego.crashed = ("ir0", "il1", 0), True  # the ego is never its own wreck
+    assert not wrecked(base, collision=False, goal=False)
+    assert _wrecks({"wrecked": 3, "deadlock_wrecked": 2}) == "3 (2)"
+    assert _wrecks({"wrecked": None, "deadlock_wrecked": None}) == "n/a"
 
 
 # ------------------------------------------------------------------------------------ bad input
