@@ -31,8 +31,9 @@ junction (its yielding rule lets two vehicles each wait for the other, or two of
 each other there), which no driver can cross while it lasts.
 
 **Behind a wreck** (:func:`wrecked`): at an episode's end without a collision or the goal, a vehicle
-other than the ego that crashed (into another: the ego did not) stands inside the junction. highway-env
-never clears a wreck, so the junction stays blocked for the rest of the episode, whatever the ego does.
+other than the ego that crashed (into another: the ego did not) stands on the ego's way, its centre
+within :data:`WRECK_REACH` of the centre line of the ego's route ahead of it. highway-env never
+clears a wreck, so the way stays blocked for the rest of the episode, whatever the ego does.
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ STOPPED_SPEED = 0.1
 """Speed [m/s] below which the ego counts as stopped."""
 DEADLOCK_WINDOW = 10.0
 """How long [s] the ego must have been stopped at an episode's end for a deadlock."""
+WRECK_REACH = 2.5
+"""Distance [m] from the ego's route's centre line within which a wreck's centre blocks the way: two
+cars' half widths (highway-env's cars are 2 m wide) and 0.5 m."""
 _CACHE: dict[tuple[Any, ...], tuple[Any, Any]] = {}
 
 
@@ -134,17 +138,24 @@ def jammed(
     return not collision and not goal and any(end - t >= window - 1e-9 for t in since.values())
 
 
-def wrecked(base: Any, collision: bool, goal: bool) -> bool:
-    """Whether a crashed vehicle other than the ego stands inside the junction (on a lane from an
-    ``ir*`` node) of ``base`` (the unwrapped env at an episode's end, neither ``collision`` nor ``goal``)."""
-    from risk_env.highway.gate import JUNCTION_PREFIX
+def wrecked(base: Any, destination: str, collision: bool, goal: bool) -> bool:
+    """Whether a crashed vehicle other than the ego stands on the ego's way in ``base`` (the unwrapped
+    env at an episode's end, neither ``collision`` nor ``goal``): its centre within :data:`WRECK_REACH`
+    of the route from the ego's lane to ``destination``, from the ego on (False where there is no
+    such route: an ego on a wrong exit has no way to block)."""
+    from risk_env.highway.route import RoutePath
 
-    if collision or goal:
+    wrecks = [v for v in base.road.vehicles if v is not base.vehicle and v.crashed]
+    if collision or goal or not wrecks:
         return False
-    return any(
-        v is not base.vehicle and v.crashed and str(v.lane_index[0]).startswith(JUNCTION_PREFIX)
-        for v in base.road.vehicles
-    )
+    ego = base.vehicle
+    try:
+        route = RoutePath.of_vehicle(base.road.network, ego, destination)
+    except ValueError:
+        return False
+    start = route.progress(0, *map(float, ego.position[:2]))
+    way = route.position(np.arange(start, float(np.sum(route.lengths)) + 1e-9, 1.0))
+    return any(np.min(np.hypot(*(way - np.asarray(v.position[:2])).T)) <= WRECK_REACH for v in wrecks)
 
 
 def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
@@ -199,7 +210,7 @@ def run_episode(driver: Any, env: Any, seed: int, slots: int) -> dict[str, Any]:
         "timeout": not crashed and not goal,
         "deadlock": deadlocked(np.array(times), np.array(speeds), crashed, goal),
         "jammed": jammed(inside, times[-1], crashed, goal),
-        "wrecked": wrecked(base, crashed, goal),
+        "wrecked": wrecked(base, driver.destination, crashed, goal),
         "final_speed": speeds[-1],
         "off_road": off_road > 0,
         "off_road_steps": off_road,

@@ -152,7 +152,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
         f" min): {load} on {os.cpu_count()} cores. Rates: % [Wilson 95 % interval]. Deadlock: no"
         " collision, no goal, the ego stopped (< 0.1 m/s) over the last 10 s; jammed: no collision, no goal,"
         " another vehicle stopped inside the junction over the last 10 s; behind a wreck: no collision, no"
-        " goal, a vehicle that crashed into another stands inside the junction. Left the road: off every"
+        " goal, a vehicle that crashed into another stands on the ego's way (its centre within 2.5 m of the"
+        " route ahead). Left the road: off every"
         " lane of the map at some step.",
         "",
     ]

@@ -270,26 +270,43 @@ def test_a_jam_is_a_vehicle_standing_in_the_junction_for_the_last_ten_seconds():
     assert standing_inside(base, since) == {}
 
 
-def test_a_wreck_in_the_junction_is_counted_and_an_episode_from_before_the_count_is_unknown():
-    """wrecked: a crashed vehicle other than the ego inside the junction at a timeout; not one on
-    its approach, not the ego, not after a collision or the goal. Rows without the field (chunks
-    resumed from before the count) leave the summary's count unknown ("n/a"), never 0."""
+def test_a_wreck_on_the_egos_way_is_counted_and_an_episode_from_before_the_count_is_unknown():
+    """wrecked: a crashed vehicle other than the ego whose centre lies within 2.5 m of the ego's route
+    ahead of it, at a timeout; not one beside the way or behind the ego, not the ego, not after a
+    collision or the goal. Rows without the field (chunks resumed from before the count) leave the
+    summary's count unknown ("n/a"), never 0."""
     from types import SimpleNamespace as Car
 
     from benchmarks.highway_tables import _wrecks
+    from risk_env.highway import make_intersection_env
+    from risk_env.highway.route import RoutePath
 
-    ego = Car(lane_index=("o0", "ir0", 0), crashed=False)
-    wreck = Car(lane_index=("ir3", "il0", 0), crashed=True)
-    outside = Car(lane_index=("o2", "ir2", 0), crashed=True)
-    base = Car(vehicle=ego, road=Car(vehicles=[ego, outside]))
-    assert not wrecked(base, collision=False, goal=False)
-    base.road.vehicles.append(wreck)
-    assert wrecked(base, collision=False, goal=False)
-    assert not wrecked(base, collision=True, goal=False) and not wrecked(base, collision=False, goal=True)
-    wreck.crashed = False  # standing, not crashed: a jam, not a wreck
-    assert not wrecked(base, collision=False, goal=False)
-    ego.lane_index, ego.crashed = ("ir0", "il1", 0), True  # the ego is never its own wreck
-    assert not wrecked(base, collision=False, goal=False)
+    env = make_intersection_env()
+    env.reset(seed=0)
+    base = env.unwrapped
+    destination = base.config["destination"]
+    route = RoutePath.of_vehicle(base.road.network, base.vehicle, destination)
+    start = route.progress(0, *base.vehicle.position)
+    base.road.vehicles[:] = [base.vehicle]
+    on_way = Car(position=route.position(start + 30.0) + np.array([1.5, 1.5]) / np.sqrt(2.0), crashed=True)
+    behind = Car(position=route.position(max(start - 8.0, 0.0)), crashed=True)
+    assert start - 8.0 > 3.0  # the ego starts more than a car's length into its lane
+    assert not wrecked(base, destination, collision=False, goal=False)
+    base.road.vehicles.append(behind)
+    assert not wrecked(base, destination, collision=False, goal=False)
+    base.road.vehicles.append(on_way)
+    assert wrecked(base, destination, collision=False, goal=False)
+    assert not wrecked(base, destination, collision=True, goal=False)
+    assert not wrecked(base, destination, collision=False, goal=True)
+    on_way.crashed = False  # standing, not crashed: a jam, not a wreck
+    assert not wrecked(base, destination, collision=False, goal=False)
+    on_way.crashed = True
+    along = route.position(start + 31.0) - route.position(start + 29.0)
+    beside = route.position(start + 30.0) + 3.5 * np.array([-along[1], along[0]]) / np.hypot(*along)
+    on_way.position = beside  # 3.5 m to the side: the next lane
+    assert not wrecked(base, destination, collision=False, goal=False)
+    base.vehicle.crashed = True  # the ego is never its own wreck
+    assert not wrecked(base, destination, collision=False, goal=False)
     assert _wrecks({"wrecked": 3, "deadlock_wrecked": 2}) == "3 (2)"
     assert _wrecks({"wrecked": None, "deadlock_wrecked": None}) == "n/a"
 
