@@ -50,9 +50,9 @@ import numpy as np
 from risk_env.models.frame import to_frame
 from risk_env.models.ops import CASADI, MATH, NUMPY, Ops
 from risk_env.prediction.belief import Belief
-from risk_env.risk.disc import signed_box_distance
 from risk_env.risk.estimator import RiskEstimator, ego_parts
 from risk_env.risk.quadrature import GEOMETRY_FLOOR
+from risk_env.risk.worst_case import box_distance
 from risk_env.scenario.scenario import Scenario
 
 Offsets = tuple[float, ...]
@@ -224,9 +224,7 @@ class BodyRisk(RiskEstimator):
         capsule = stretched(belief, self.half_lengths[1])
         out = None
         for a in self.ego_offsets:
-            x, y, _, _ = ego_parts(moved_ego(ego, a))
-            dx, dy = to_frame(x - capsule.x, y - capsule.y, capsule.frame, ops)
-            d = signed_box_distance(dx, dy, capsule.half_x, capsule.half_y, ops)
+            d = box_distance(moved_ego(ego, a), capsule, ops)
             out = d if out is None else ops.minimum(out, d)
         return out - self.radius
 

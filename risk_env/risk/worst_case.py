@@ -16,6 +16,14 @@ from risk_env.risk.quadrature import GEOMETRY_FLOOR
 from risk_env.scenario.scenario import Scenario
 
 
+def box_distance(ego: Any, belief: Belief, ops: Ops = NUMPY) -> Any:
+    """Signed distance [m] from the ego centre to the belief's truncation box, in its frame
+    (negative inside)."""
+    x, y, _, _ = ego_parts(ego)
+    dx, dy = to_frame(x - belief.x, y - belief.y, belief.frame, ops)
+    return signed_box_distance(dx, dy, belief.half_x, belief.half_y, ops)
+
+
 class WorstCaseRisk(RiskEstimator):
     r"""$\max I_C s$ over the truncation box and speed interval (paper eq. 17); the box and its grid
     lie in the belief's frame.
@@ -46,10 +54,10 @@ class WorstCaseRisk(RiskEstimator):
         """Distance [m] from the ego centre to the nearest possible object centre (signed for
         the box: negative inside). The box and the grid lie in the belief's frame: the offset is
         turned into it (distances do not change)."""
+        if not self.grid:
+            return box_distance(ego, belief, ops)
         x, y, _, _ = ego_parts(ego)
         dx, dy = to_frame(x - belief.x, y - belief.y, belief.frame, ops)
-        if not self.grid:
-            return signed_box_distance(dx, dy, belief.half_x, belief.half_y, ops)
         ex = dx - self._snap(dx, belief.half_x, ops)
         ey = dy - self._snap(dy, belief.half_y, ops)
         return ops.sqrt(ex * ex + ey * ey + 1e-12) - 1e-6
