@@ -217,7 +217,7 @@ def body_overrides(args: argparse.Namespace) -> dict[str, Any]:
     return {f"{who}_{k}": v for who in ("ego", "object") for k, v in body.items()}
 
 
-INTERVAL_SWITCHES = ("split_yield", "centred", "yield_to_ego")
+INTERVAL_SWITCHES = ("split_yield", "centred", "fitted", "yield_to_ego")
 """The interval prediction's switches a benchmark's ``--interval`` may turn on
 (:class:`~risk_env.highway.lanes.interval.IntervalModel`'s bool fields of these names)."""
 
@@ -243,6 +243,8 @@ def add_interval_option(parser: argparse.ArgumentParser) -> None:
         default=(),
         help="comma list of the lane+interval predictor's switches to turn on: split_yield (each mode"
         " held or free, weighted by the yielding rule), centred (each box centred on its interval),"
+        " fitted (each box the tightest in its frame, about the stretch it holds: on a curve no longer"
+        " as far outside the arc as inside it),"
         " yield_to_ego (no box runs through a standing ego from one that follows it or yields to it)",
     )
 
@@ -279,7 +281,8 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         "--gate-judge",
         choices=JUDGES,
         default=defaults.judge,
-        help="the gate judges each mode's boxes or mean car",
+        help="the gate judges each mode's boxes, mean car, boxes then mean car (near), or the stretch of"
+        " its route then mean car (stretch)",
     )
     parser.add_argument(
         "--gate-tolerance",

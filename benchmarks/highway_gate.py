@@ -51,6 +51,7 @@ JUDGED = {
     "boxes": "truncation boxes",
     "footprint": "mean car",
     "near": "truncation boxes over the MPCs' 3 s horizon and mean car after",
+    "stretch": "stretch of its route over the MPCs' 3 s horizon and mean car after",
 }
 """How the table's header names each judge's view of a mode."""
 

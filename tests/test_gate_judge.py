@@ -208,3 +208,39 @@ def test_the_commands_defaults_are_the_adapters():
     args = highway_intersection.parse_args(["--object-radius", "1"])
     driver = make_driver(resolve("rmpc", args.severity, args.budget), make_intersection_env(), args, "lane")
     assert driver.base_scenario.objects[0].radius == 1.0 and driver.base_scenario.ego.radius == 2.0
+
+
+def test_the_stretch_judge_sees_a_crossing_and_not_a_turn_beside_the_egos():
+    pytest.importorskip("highway_env")
+    from risk_env.highway import LanePredictor, make_intersection_env
+    from risk_env.highway.gate_judge import occupancy
+    from risk_env.highway.lanes.interval import IntervalModel
+    from risk_env.highway.lanes.routes import Route
+
+    env = make_intersection_env()
+    env.reset(seed=0)
+    network = env.unwrapped.road.network
+    model = IntervalModel(split_yield=True, centred=True)
+    predictor = LanePredictor(network, DT, longitudinal="interval", intervals=model)
+    left_turn = Route(network, (("ir0", "il1", 0),))  # intersection-v2's ego, through the junction
+    points = left_turn.position(np.arange(0.0, left_turn.length, 1.0))
+    lane = network.get_lane(("o1", "ir1", 0))  # the west road, 5 m before the junction, at 6 m/s
+    x, y = lane.position(lane.length - 5.0, 0.0)
+    modes = {
+        m.label: m
+        for m in predictor.predict(np.array([x, y, lane.heading_at(lane.length - 5.0), 6.0, 0.0]), 12).modes
+    }
+    first = {}
+    for label, mode in modes.items():
+        assert mode.stretch is not None and mode.stretch.points.shape[0] == 13
+        for judge, steps in (("near", 0), ("stretch", NEAR_STEPS)):
+            first[label, judge] = float(
+                np.min(occupancy(judged(mode, judge), points, 2.0, DT, 0.0, steps)[0])
+            )
+    # its right turn runs 4 m inside the ego's left turn: the box about the arc reaches over it, the
+    # stretch never comes within 2 m
+    assert first["o1>ir1>il0>o0", "near"] < NEAR_STEPS * DT
+    assert first["o1>ir1>il0>o0", "stretch"] == math.inf
+    # straight on, or turning left, it crosses the ego's path: the stretch sees it as soon as the box does
+    for label in ("o1>ir1>il3>o3", "o1>ir1>il2>o2"):
+        assert first[label, "stretch"] <= first[label, "near"] < NEAR_STEPS * DT

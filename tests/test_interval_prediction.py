@@ -183,3 +183,42 @@ def test_bad_names_and_numbers_are_named(env, straight):
         make_predictor("lane+interval", Scenario())
     with pytest.raises(SystemExit):
         highway_intersection.parse_args(["--predictor", "interval"])
+
+
+def test_a_fitted_box_holds_its_stretch_of_a_turn_and_keeps_off_the_concentric_lane(env):
+    from risk_env.highway.lanes.beliefs import Spread, mode_beliefs
+    from risk_env.highway.lanes.routes import Route
+    from risk_env.risk.disc import signed_box_distance
+
+    network = env.unwrapped.road.network
+    # the west road's right turn, concentric with the ego's left turn 4 m outside it
+    turn = Route(network, (("o1", "ir1", 0), ("ir1", "il0", 0), ("il0", "o0", 0)))
+    outer = Route(network, (("o0", "ir0", 0), ("ir0", "il1", 0)))
+    start = float(network.get_lane(("o1", "ir1", 0)).length) - 8.0
+    t = np.arange(STEPS + 1) * T
+    s_lo, s_hi = start + 6.0 * t - 0.5 * t**2, start + 6.0 * t + 0.5 * t**2  # from 6 m/s, into the turn
+    s = ((s_lo + s_hi) / 2)[None]
+    bounds = (s_lo[None], s_hi[None], np.full((1, STEPS + 1), 4.0), np.full((1, STEPS + 1), 8.0))
+    speeds = np.full_like(s, 6.0)
+    args = (Spread(), turn, s, speeds, np.ones(1), start, 0.0, 6.0, T, 6.0, 1.0, (0, 1), bounds, 0.75, True)
+    (fitted, held), (symmetric, _) = mode_beliefs(*args, True), mode_beliefs(*args, False)
+    lane = outer.position(np.arange(outer.length * 0.2, outer.length, 0.25))
+    clearance: dict[str, list[float]] = {}
+    for name, b in (("fitted", fitted), ("symmetric", symmetric)):
+        gaps = []
+        for n in range(STEPS + 1):
+            lo, hi = s_lo[n] - Spread().margin_along, s_hi[n] + Spread().margin_along
+            stretch = turn.position(np.linspace(lo, hi, 50))
+            dx, dy = to_frame(stretch[:, 0] - b.x[n], stretch[:, 1] - b.y[n], b.frame[n])
+            assert np.all(np.abs(dx) <= b.half_x[n] + 1e-6) and np.all(np.abs(dy) <= b.half_y[n] + 1e-6), name
+            # the stretch the gate may judge instead is the one the box holds
+            dx, dy = to_frame(held.points[n, :, 0] - b.x[n], held.points[n, :, 1] - b.y[n], b.frame[n])
+            assert np.all(np.abs(dx) <= b.half_x[n] + 1e-6) and np.all(np.abs(dy) <= b.half_y[n] + 1e-6), name
+            dx, dy = to_frame(lane[:, 0] - b.x[n], lane[:, 1] - b.y[n], b.frame[n])
+            gaps.append(float(np.min(signed_box_distance(dx, dy, b.half_x[n], b.half_y[n]))))
+        clearance[name] = gaps
+    assert np.all(fitted.half_x * fitted.half_y <= symmetric.half_x * symmetric.half_y + 1e-9)
+    # the symmetric box bows out as far as the arc bows in, over the lane beside it (0.5 m from it at
+    # 3 s); the fitted one never comes nearer, and at 3 s stays more than a metre farther off
+    assert np.all(np.array(clearance["fitted"]) >= np.array(clearance["symmetric"]) - 1e-9)
+    assert clearance["symmetric"][-1] < 1.0 and clearance["fitted"][-1] > clearance["symmetric"][-1] + 1.0

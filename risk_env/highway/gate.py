@@ -62,6 +62,7 @@ from risk_env.highway.gate_judge import (
     GATE_MARGIN,
     GATE_THRESHOLD,
     JUDGES,
+    NEAR_STEPS,
     GateSettings,
     conflict_chance,
     judged,
@@ -260,10 +261,12 @@ class JunctionGate:
         ego_out = travel_time(s + self.clearance - progress, speed, self.accel, self.speed_cap)
         steps = min(GATE_STEPS, math.ceil((float(ego_out.max()) + self.margin) / self.dt))
         slack, masses = math.inf, []
+        stretch_steps = NEAR_STEPS if self.judge == "stretch" else 0
         for mixture in self._predict(np.asarray(others, dtype=float), steps, signals):
             mass = 0.0
             for mode in mixture.above(self.threshold):
-                first, last = occupancy(judged(mode, self.judge), points, self.clearance, self.dt, 0.0)
+                seen = judged(mode, self.judge)
+                first, last = occupancy(seen, points, self.clearance, self.dt, 0.0, stretch_steps)
                 # apart: it comes after the ego has cleared the point, or has left before the ego comes
                 apart = float(np.min(np.maximum(first - ego_out, ego_in - last)))
                 slack = min(slack, apart)

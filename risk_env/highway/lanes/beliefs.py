@@ -68,6 +68,19 @@ class Spread:
                 raise ValueError(f"Spread.{name} must be a finite number >= 0, got {value!r}")
 
 
+@dataclass(frozen=True)
+class Stretch:
+    """Where a mode's road user may be along its route: the centreline (with the lateral offset) from
+    the box's rear end to its front end, sampled every :data:`BOX_SPACING` metres or closer, and how
+    far across it may stray (what the box adds across): the shape the box holds, for a judge that
+    needs no box (:mod:`~risk_env.highway.gate_judge`'s ``"stretch"``)."""
+
+    points: np.ndarray
+    """``(N+1, count, 2)``: world positions [m] along the stretch at each step."""
+    across: np.ndarray
+    """``(N+1,)``: how far [m] the centre may lie off those points across the lane."""
+
+
 def mode_beliefs(
     spread: Spread,
     route: Route,
@@ -84,8 +97,9 @@ def mode_beliefs(
     bounds: tuple[np.ndarray, ...] | None = None,
     margin_turn: float = 0.0,
     centred: bool = False,
-) -> Belief:
-    """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame.
+    fitted: bool = False,
+) -> tuple[Belief, Stretch]:
+    """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame, and the stretch they hold.
 
     ``route``: the geometry (the mode's most likely route); ``s``, ``v``: ``(R, N+1)`` arc lengths
     [m] and speeds [m/s] of the mode's routes (same arc length along their shared lanes), ``share``:
@@ -97,7 +111,9 @@ def mode_beliefs(
     ``bounds``: ``(s_lo, s_hi, v_lo, v_hi)`` ``(R, N+1)`` of the mode's routes (the interval
     prediction, :func:`~risk_env.highway.lanes.interval.interval_bounds`) instead of full braking to
     full acceleration, clipped to that full range; ``margin_turn`` [m] is added across where the
-    route curves at the mean; ``centred``: the mean along the route at the middle of ``bounds``."""
+    route curves at the mean; ``centred``: the mean along the route at the middle of ``bounds``;
+    ``fitted``: each box the tightest in its frame that holds the stretch, the mean at its centre
+    (else symmetric about the mean)."""
     steps = s.shape[1] - 1
     t = np.arange(steps + 1) * dt
     s_mean, v_mean = share @ s, share @ v
@@ -126,15 +142,27 @@ def mode_beliefs(
     mean = route.position(s_mean, lateral)
     count = max(int(math.ceil(float((s_hi - s_lo).max()) / BOX_SPACING)), 1) + 1
     grid = s_lo[:, None] + (s_hi - s_lo)[:, None] * np.linspace(0.0, 1.0, count)[None, :]
-    points = route.position(grid, np.broadcast_to(lateral[:, None], grid.shape)) - mean[:, None, :]
+    on_route = route.position(grid, np.broadcast_to(lateral[:, None], grid.shape))
+    points = on_route - mean[:, None, :]
     candidates = np.stack([route.heading(s_mean), route.heading((s_lo + s_hi) / 2)])  # (2, N+1)
     c, si = np.cos(candidates)[..., None], np.sin(candidates)[..., None]
-    half_x = np.abs(c * points[None, ..., 0] + si * points[None, ..., 1]).max(axis=-1)
-    half_y = np.abs(c * points[None, ..., 1] - si * points[None, ..., 0]).max(axis=-1) + spread.margin_across
-    half_y = half_y + margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)[None, :]
+    along = c * points[None, ..., 0] + si * points[None, ..., 1]  # (2, N+1, count) in each frame
+    across = c * points[None, ..., 1] - si * points[None, ..., 0]
+    if fitted:  # about the stretch's extent: the centre's offset from the mean in each frame
+        mid_x, mid_y = (along.max(-1) + along.min(-1)) / 2, (across.max(-1) + across.min(-1)) / 2
+    else:
+        mid_x = mid_y = np.zeros(along.shape[:2])
+    half_x = np.abs(along - mid_x[..., None]).max(axis=-1)
+    half_y = np.abs(across - mid_y[..., None]).max(axis=-1) + spread.margin_across
+    across = spread.margin_across + margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)
+    half_y = half_y + (across - spread.margin_across)[None, :]
     best = np.argmin(half_x * half_y, axis=0)  # (N+1,): the smaller box
     columns = np.arange(steps + 1)
     frame, half_x, half_y = candidates[best, columns], half_x[best, columns], half_y[best, columns]
+    mid_x, mid_y = mid_x[best, columns], mid_y[best, columns]
+    mean = mean + np.stack(
+        [np.cos(frame) * mid_x - np.sin(frame) * mid_y, np.sin(frame) * mid_x + np.cos(frame) * mid_y], axis=1
+    )
     width = np.array([float(route.objects[int(k)].width_at(0.0)) for k in route.lane_of(s_mean)])
     growth = np.sqrt(
         spread.sigma_along0**2 + (spread.sigma_speed * t) ** 2 + (spread.sigma_accel * t**2 / 2) ** 2
@@ -143,9 +171,10 @@ def mode_beliefs(
     sigma_y = np.minimum(np.minimum(spread.sigma_across, half_y), width / 2)
     sigma_v = spread.sigma_speed + spread.sigma_accel * t
     heading = route.heading(s_mean)
-    return lane_belief(
+    belief = lane_belief(
         mean[:, 0], mean[:, 1], heading, v_mean, sigma_x, sigma_y, sigma_v, half_x, half_y, v_lo, v_hi, frame
     )
+    return belief, Stretch(on_route, across)
 
 
 def lane_belief(

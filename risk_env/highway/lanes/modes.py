@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from risk_env.highway.lanes.beliefs import Stretch
 from risk_env.highway.lanes.interval import IntervalBounds
 from risk_env.prediction.mixture import Mode
 
@@ -24,6 +25,8 @@ class LaneMode(Mode):
     routes: tuple[tuple[str, float], ...] = ()
     """The routes this mode stands for, ``(label, weight)``, labels as :meth:`Route.label
     <risk_env.highway.lanes.routes.Route.label>`; their weights sum to the mode's."""
+    stretch: Stretch | None = None
+    """The stretch of its route its boxes hold (None: not known)."""
 
 
 def mode_parts(

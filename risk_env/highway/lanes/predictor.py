@@ -372,7 +372,7 @@ class LanePredictor(Predictor):
                     (hyp.routes[k].label(), float(hyp.weights[k]) * part / self.pieces) for k in group
                 )
                 for j in range(self.pieces):
-                    beliefs = mode_beliefs(
+                    beliefs, stretch = mode_beliefs(
                         self.spread,
                         hyp.routes[lead],
                         s_b,
@@ -388,9 +388,12 @@ class LanePredictor(Predictor):
                         box,
                         0.0 if bounds is None else self.intervals.margin_turn,
                         self.intervals.centred,
+                        self.intervals.fitted,
                     )
                     name = label + suffix + ("" if self.pieces == 1 else f"#{j + 1}/{self.pieces}")
-                    modes.append((total * part / self.pieces, beliefs, name, routes))
+                    modes.append((total * part / self.pieces, beliefs, name, routes, stretch))
         norm = sum(m[0] for m in modes)
         share = 1.0 / self.pieces
-        return Mixture(tuple(LaneMode(w / norm, b, label, share, routes=r) for w, b, label, r in modes))
+        return Mixture(
+            tuple(LaneMode(w / norm, b, label, share, routes=r, stretch=st) for w, b, label, r, st in modes)
+        )
