@@ -13,8 +13,10 @@ whole episode (the hindsight reference's driver told never to go,
   ``--predictor``, with ``--clearance``, ``--margin`` and, with ``--given-ego``, the others
   predicted given that the ego goes) whether it would let the ego go now, and
 - **the future**: a copy of the simulator (the traffic's random draws included) in which the ego
-  goes now and drives on to the episode's end (highway-env's IDM on its route, never yielding):
-  whether it comes through without a collision (*free*).
+  goes now and drives on to the episode's end (highway-env's IDM on its route, never yielding;
+  with ``--future-ego planner`` at the planners' acceleration and reference speed, which the gate
+  assumes, instead of highway-env's traffic's): whether it comes through without a collision
+  (*free*).
 
 ``gate.md`` has, per configuration: the steps judged, the free ones, the steps the gate opened,
 and the openings at a step where going collided (*bad*: a gate that is right never has one);
@@ -45,6 +47,11 @@ DESTINATION = "o1"
 """The ego's destination: ``intersection-v2``'s (a left turn)."""
 FILES = ("gate.csv", "gate.md")
 FIELDS = ("seed", "step", "time_s", "free", "open", "slack_s")
+FUTURE_EGOS = {
+    "idm": "highway-env's IDM, with its traffic's acceleration, up to the lanes' limit",
+    "planner": "an IDM with the acceleration and the speed the gate assumes for the ego (the planners')",
+}
+"""How the table's header names each ``--future-ego``."""
 
 
 JUDGED = {
@@ -52,6 +59,7 @@ JUDGED = {
     "footprint": "mean car",
     "near": "truncation boxes over the MPCs' 3 s horizon and mean car after",
     "stretch": "stretch of its route over the MPCs' 3 s horizon and mean car after",
+    "tracks": "tracks along the stretch of its route, each a share of its weight",
 }
 """How the table's header names each judge's view of a mode."""
 
@@ -96,7 +104,9 @@ def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
             gate.committed, gate.last = False, type(gate.last)(False, False)
             verdict = gate.decide(progress, float(ego.speed), others, signals)
             future = copy.deepcopy(base)
-            put_ego(future, scheduled_vehicle(future, 0, DESTINATION))
+            ours = args.future_ego == "planner"  # our ego's acceleration and speed, as the gate judges it
+            accel, cap = (gate.accel, gate.speed_cap) if ours else (None, None)
+            put_ego(future, scheduled_vehicle(future, 0, DESTINATION, accel, cap))
             crashed, _ = outcome(future, DESTINATION)
             rows.append(
                 {
@@ -145,7 +155,7 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
             f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}"
             f"{', turn signals read' if args.signals else ''}; each mode judged by its"
             f" {JUDGED[args.judge]}, the gate closing"
-            f" {closing}."
+            f" {closing}. Going at once: {FUTURE_EGOS[args.future_ego]}."
             " Wall time"
             f" {wall:.0f} s. Rates: of the steps judged (free, opened) or of the free steps (opened"
             " where free) [Wilson 95 %].",
@@ -207,6 +217,14 @@ def build_parser() -> argparse.ArgumentParser:
         action=argparse.BooleanOptionalAction,
         default=defaults.given_ego,
         help="predict the others given that the ego goes (lane+interval only; else with the ego braking)",
+    )
+    parser.add_argument(
+        "--future-ego",
+        choices=("idm", "planner"),
+        default="idm",
+        help="who drives the ego that goes at once: highway-env's IDM (its traffic's acceleration, up to"
+        " the lanes' limit), or an IDM with the planners' acceleration and reference speed, as the gate"
+        " judges the ego",
     )
     parser.add_argument(
         "--workers", type=cli.positive_int, default=None, help="processes (default: all cores)"

@@ -34,9 +34,13 @@ JUNCTION_PREFIX = "ir"
 """A route lane to a node named so ends at highway-env's intersection entry (``o* -> ir*``)."""
 
 
-def scheduled_vehicle(base: Any, go_at: float, destination: str) -> Any:
+def scheduled_vehicle(
+    base: Any, go_at: float, destination: str, accel: float | None = None, speed: float | None = None
+) -> Any:
     """A copy of ``base``'s controlled vehicle as the schedule's driver to ``destination``, waiting at
-    the stop line for ``go_at`` simulation frames from now (inf: throughout; see the module)."""
+    the stop line for ``go_at`` simulation frames from now (inf: throughout; see the module);
+    ``accel`` [m/s^2] and ``speed`` [m/s]: its IDM's largest comfortable acceleration and its
+    desired speed (None: highway-env's traffic's, and the lanes' limit)."""
     from highway_env.vehicle.behavior import IDMVehicle
     from highway_env.vehicle.kinematics import Vehicle
 
@@ -45,7 +49,8 @@ def scheduled_vehicle(base: Any, go_at: float, destination: str) -> Any:
         its own clock (frames since it was placed)."""
 
         def act(self, action: Any = None) -> None:
-            self.target_speed = self.lane.speed_limit  # never yields: the schedule decides
+            cap = math.inf if speed is None else speed  # never yields: the schedule decides
+            self.target_speed = min(self.lane.speed_limit, cap)
             super().act(action)
 
         def step(self, dt: float) -> None:
@@ -68,6 +73,8 @@ def scheduled_vehicle(base: Any, go_at: float, destination: str) -> Any:
     ego = Scheduled(base.road, old.position.copy(), heading=old.heading, speed=old.speed)
     ego.plan_route_to(destination)
     ego.go_at, ego.clock = go_at, 0
+    if accel is not None:
+        ego.COMFORT_ACC_MAX = float(accel)
     return ego
 
 

@@ -210,26 +210,35 @@ def test_the_commands_defaults_are_the_adapters():
     assert driver.base_scenario.objects[0].radius == 1.0 and driver.base_scenario.ego.radius == 2.0
 
 
-def test_the_stretch_judge_sees_a_crossing_and_not_a_turn_beside_the_egos():
+def west_road(back: float, speed: float):
+    """intersection-v2's map, the ego's left turn through the junction sampled every metre ``(J, 2)``,
+    and the modes (by route) of a vehicle on the west road ``back`` metres before the junction at
+    ``speed`` [m/s], on the interval prediction with fitted boxes."""
     pytest.importorskip("highway_env")
     from risk_env.highway import LanePredictor, make_intersection_env
-    from risk_env.highway.gate_judge import occupancy
     from risk_env.highway.lanes.interval import IntervalModel
     from risk_env.highway.lanes.routes import Route
 
     env = make_intersection_env()
     env.reset(seed=0)
     network = env.unwrapped.road.network
-    model = IntervalModel(split_yield=True, centred=True)
+    model = IntervalModel(split_yield=True, centred=True, fitted=True)
     predictor = LanePredictor(network, DT, longitudinal="interval", intervals=model)
-    left_turn = Route(network, (("ir0", "il1", 0),))  # intersection-v2's ego, through the junction
+    left_turn = Route(network, (("ir0", "il1", 0),))
     points = left_turn.position(np.arange(0.0, left_turn.length, 1.0))
-    lane = network.get_lane(("o1", "ir1", 0))  # the west road, 5 m before the junction, at 6 m/s
-    x, y = lane.position(lane.length - 5.0, 0.0)
-    modes = {
-        m.label: m
-        for m in predictor.predict(np.array([x, y, lane.heading_at(lane.length - 5.0), 6.0, 0.0]), 12).modes
-    }
+    lane = network.get_lane(("o1", "ir1", 0))
+    x, y = lane.position(lane.length - back, 0.0)
+    measured = np.array([x, y, lane.heading_at(lane.length - back), speed, 0.0])
+    return points, {m.label: m for m in predictor.predict(measured, 12).modes}
+
+
+RIGHT, STRAIGHT, LEFT = "o1>ir1>il0>o0", "o1>ir1>il3>o3", "o1>ir1>il2>o2"
+
+
+def test_the_stretch_judge_sees_a_crossing_and_not_a_turn_beside_the_egos():
+    from risk_env.highway.gate_judge import occupancy
+
+    points, modes = west_road(5.0, 6.0)
     first = {}
     for label, mode in modes.items():
         assert mode.stretch is not None and mode.stretch.points.shape[0] == 13
@@ -239,8 +248,30 @@ def test_the_stretch_judge_sees_a_crossing_and_not_a_turn_beside_the_egos():
             )
     # its right turn runs 4 m inside the ego's left turn: the box about the arc reaches over it, the
     # stretch never comes within 2 m
-    assert first["o1>ir1>il0>o0", "near"] < NEAR_STEPS * DT
-    assert first["o1>ir1>il0>o0", "stretch"] == math.inf
+    assert first[RIGHT, "near"] < NEAR_STEPS * DT
+    assert first[RIGHT, "stretch"] == math.inf
     # straight on, or turning left, it crosses the ego's path: the stretch sees it as soon as the box does
-    for label in ("o1>ir1>il3>o3", "o1>ir1>il2>o2"):
+    for label in (STRAIGHT, LEFT):
         assert first[label, "stretch"] <= first[label, "near"] < NEAR_STEPS * DT
+
+
+def test_the_tracks_judge_counts_the_share_of_a_vehicles_speeds_that_meet_the_ego():
+    from risk_env.highway.gate_judge import mode_conflict
+
+    points, modes = west_road(15.0, 6.0)
+
+    def judge(label: str, t0: float, name: str = "tracks") -> tuple[float, float]:
+        ego_in = np.full(len(points), t0)  # the ego at every point from t0 for 0.6 s
+        return mode_conflict(modes[label], name, points, 2.0, DT, ego_in, ego_in + 0.6, 0.25)
+
+    # straight on it crosses the ego's path between 2 and 4 s, the fast tracks first
+    shares = [judge(STRAIGHT, t0)[1] for t0 in (0.0, 2.0, 3.0, 5.0)]
+    assert shares[0] == 0.0 and 0.0 < shares[1] < shares[2] and shares[3] < shares[2]
+    apart, share = judge(STRAIGHT, 0.0)
+    assert apart >= 0.25 and share == 0.0  # the ego has gone before the fastest track comes
+    apart, share = judge(STRAIGHT, 2.0)
+    assert apart < 0.25 and 0.0 < share < 1.0
+    # the box judges the mode whole: it conflicts wherever a track does
+    assert judge(STRAIGHT, 2.0, "near")[1] == 1.0
+    # its right turn, 4 m inside the ego's left turn, never meets it
+    assert all(judge(RIGHT, t0) == (math.inf, 0.0) for t0 in (0.0, 2.0, 3.0, 5.0))

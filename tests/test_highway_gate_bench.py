@@ -3,8 +3,10 @@ short episode, and its bad input."""
 
 from __future__ import annotations
 
+import copy
 import csv
 
+import numpy as np
 import pytest
 
 pytest.importorskip("highway_env")
@@ -54,3 +56,27 @@ def test_the_header_names_every_judge():
     from risk_env.highway.gate_judge import JUDGES
 
     assert set(JUDGED) == set(JUDGES) and len(set(JUDGED.values())) == len(JUDGES)
+
+
+def test_the_ego_that_goes_at_once_may_drive_as_the_gate_assumes(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    from benchmarks.highway_hindsight import scheduled_vehicle
+    from risk_env.highway import make_intersection_env
+    from risk_env.highway.idm import put_ego
+
+    env = make_intersection_env()
+    env.reset(seed=0)
+    speeds = {}
+    for name, accel, cap in (("idm", None, None), ("planner", 3.0, 8.0)):
+        sim = copy.deepcopy(env.unwrapped)
+        put_ego(sim, scheduled_vehicle(sim, 0, "o1", accel, cap))
+        sim.vehicle.speed = 0.0  # from a stop
+        trace = []
+        for _ in range(8):  # 4 s (the action is not read)
+            sim.step(np.zeros(2, dtype=np.float32))
+            trace.append(float(sim.vehicle.speed))
+        speeds[name] = trace
+    # the planners' ego accelerates at its 3 m/s^2 at most, not at the traffic's, up to its 8 m/s
+    assert speeds["planner"][0] <= 3.0 * 0.5 + 1e-6 < speeds["idm"][0]
+    assert max(speeds["planner"]) <= 8.0 + 1e-6
+    assert set(highway_gate.FUTURE_EGOS) == {"idm", "planner"}

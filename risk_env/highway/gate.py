@@ -62,11 +62,9 @@ from risk_env.highway.gate_judge import (
     GATE_MARGIN,
     GATE_THRESHOLD,
     JUDGES,
-    NEAR_STEPS,
     GateSettings,
     conflict_chance,
-    judged,
-    occupancy,
+    mode_conflict,
     travel_time,
 )
 from risk_env.highway.lane_agents import lane_scenario
@@ -261,16 +259,14 @@ class JunctionGate:
         ego_out = travel_time(s + self.clearance - progress, speed, self.accel, self.speed_cap)
         steps = min(GATE_STEPS, math.ceil((float(ego_out.max()) + self.margin) / self.dt))
         slack, masses = math.inf, []
-        stretch_steps = NEAR_STEPS if self.judge == "stretch" else 0
         for mixture in self._predict(np.asarray(others, dtype=float), steps, signals):
             mass = 0.0
             for mode in mixture.above(self.threshold):
-                seen = judged(mode, self.judge)
-                first, last = occupancy(seen, points, self.clearance, self.dt, 0.0, stretch_steps)
-                # apart: it comes after the ego has cleared the point, or has left before the ego comes
-                apart = float(np.min(np.maximum(first - ego_out, ego_in - last)))
+                apart, share = mode_conflict(
+                    mode, self.judge, points, self.clearance, self.dt, ego_in, ego_out, self.margin
+                )
                 slack = min(slack, apart)
-                mass += mode.weight * (apart < self.margin)
+                mass += mode.weight * share
             masses.append(mass)
         chance = conflict_chance(masses)
         closed = slack < self.margin if self.tolerance == 0.0 else chance > self.tolerance

@@ -11,6 +11,12 @@ r"""How the junction gate judges a vehicle's prediction (:class:`~risk_env.highw
   3 s, within which their own rows keep the ego off the same boxes), its mean car after: the boxes
   of the far future, which grow from the slowest to the fastest run, judge a gap the ego will have
   left before they are likely.
+- ``"tracks"``: a lane mode is as many tracks as its stretch has samples, track $k$ at the same
+  fraction $q_k$ of the stretch at every step (from the slow run's end to the fast run's: one
+  vehicle's speed profile), equally likely, over the whole prediction; the mode conflicts with the
+  share of its tracks that conflict, so that a gate with a ``tolerance`` accepts the chance of a
+  conflict summed over the modes' conflicting tracks (with none, any conflicting track closes it).
+  A mode without a stretch is judged as ``"near"`` judges it, wholly.
 - ``"stretch"``: as ``"near"``, but over those first steps a lane mode is judged by the stretch of
   its route its box holds (:class:`~risk_env.highway.lanes.beliefs.Stretch`: the centreline from
   the slowest run to the fastest, and what the box adds across), not by the box: a box that holds
@@ -48,7 +54,7 @@ GATE_THRESHOLD = 0.05
 """Weight of a vehicle's route hypothesis from which the gate reckons with it."""
 SUBSTEPS = 4
 """Time samples per prediction step (positions linear in between)."""
-JUDGES = ("boxes", "footprint", "near", "stretch")
+JUDGES = ("boxes", "footprint", "near", "stretch", "tracks")
 """The gate's ways of judging a mode (module docstring)."""
 
 
@@ -97,10 +103,10 @@ def judged(mode: Mode, judge: str) -> Mixture:
     """``mode`` alone, weight 1, as ``judge`` sees it: its truncation boxes, its mean car, or both in
     turn (``"stretch"``: as ``"near"``, whose boxes :func:`occupancy` replaces by the stretch)."""
     mode = dataclasses.replace(mode, weight=1.0, share=1.0)
-    if judge in ("footprint", "near", "stretch"):
+    if judge in ("footprint", "near", "stretch", "tracks"):
         b = mode.beliefs
         far = np.ones(len(b.half_x), dtype=bool)
-        if judge == "near":
+        if judge in ("near", "tracks"):
             far[: NEAR_STEPS + 1] = False
         elif judge == "stretch":  # the stretch up to NEAR_STEPS (:func:`occupancy`); from there the car,
             far[:NEAR_STEPS] = False  # so that no box leaks into the time between that step and the next
@@ -175,3 +181,53 @@ def stretch_distance(stretch: Any, points: np.ndarray, tau: np.ndarray, dt: floa
     across = np.interp(tau, np.arange(n) * dt, np.asarray(stretch.across, dtype=float))
     gap = np.linalg.norm(points[None, :, None, :] - at[:, None, :, :], axis=-1).min(axis=-1)
     return gap - spacing / 2.0 - across[:, None]
+
+
+def track_apart(
+    stretch: Any, points: np.ndarray, reach: float, dt: float, ego_in: np.ndarray, ego_out: np.ndarray
+) -> np.ndarray:
+    r"""``(K,)``: for each track of ``stretch`` (module docstring, ``"tracks"``), the least over the
+    ``points (J, 2)`` of $\max(t^o_{in,j} - t^e_{out,j}, t^e_{in,j} - t^o_{out,j})$ [s], the time by
+    which it and the ego (at point $j$ from ``ego_in`` to ``ego_out``, each ``(J,)``) keep apart
+    (below the gate's margin: a conflict); ``reach`` [m] is the gate's clearance."""
+    samples = np.asarray(stretch.points, dtype=float)  # (N+1, K, 2)
+    n = len(samples)
+    tau = np.linspace(0.0, (n - 1) * dt, max((n - 1) * SUBSTEPS, 0) + 1)
+    pos = tau / dt
+    low = np.minimum(np.floor(pos).astype(int), max(n - 2, 0))
+    frac = np.clip(pos - low, 0.0, 1.0)[:, None, None]
+    at = samples[low] * (1.0 - frac) + samples[np.minimum(low + 1, n - 1)] * frac  # (T, K, 2)
+    across = np.interp(tau, np.arange(n) * dt, np.asarray(stretch.across, dtype=float))
+    gap = np.linalg.norm(points[None, :, None, :] - at[:, None, :, :], axis=-1)  # (T, J, K)
+    near = gap - across[:, None, None] < reach
+    seen = near.any(axis=0)  # (J, K)
+    first = np.where(seen, tau[np.argmax(near, axis=0)], math.inf)
+    last = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])
+    last = np.where(seen, last, -math.inf)
+    apart = np.maximum(first - ego_out[:, None], ego_in[:, None] - last)  # (J, K)
+    return apart.min(axis=0)
+
+
+def mode_conflict(
+    mode: Mode,
+    judge: str,
+    points: np.ndarray,
+    reach: float,
+    dt: float,
+    ego_in: np.ndarray,
+    ego_out: np.ndarray,
+    margin: float,
+) -> tuple[float, float]:
+    """``(apart, share)`` of ``mode`` as ``judge`` sees it, for the ego at ``points (J, 2)`` from
+    ``ego_in`` to ``ego_out`` [s] (each ``(J,)``): the least time [s] by which they keep apart (it
+    comes after the ego has cleared a point, or has left before the ego comes), and the share of the
+    mode that conflicts (keeps apart by less than ``margin`` [s]: 0 or 1, or, for ``"tracks"``, the
+    share of its tracks); ``reach`` [m] is the gate's clearance, ``dt`` [s] the prediction step."""
+    stretch = getattr(mode, "stretch", None)
+    if judge == "tracks" and stretch is not None:
+        apart_k = track_apart(stretch, points, reach, dt, ego_in, ego_out)
+        return float(apart_k.min()), float(np.mean(apart_k < margin))
+    stretch_steps = NEAR_STEPS if judge == "stretch" else 0
+    first, last = occupancy(judged(mode, judge), points, reach, dt, 0.0, stretch_steps)
+    apart = float(np.min(np.maximum(first - ego_out, ego_in - last)))
+    return apart, float(apart < margin)
