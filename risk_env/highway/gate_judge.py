@@ -159,11 +159,28 @@ def occupancy(
         if stretch_steps and stretch is not None:
             on = stretch_distance(stretch, points, tau, dt) < reach
             near = np.where((tau <= stretch_steps * dt + 1e-9)[:, None], on, near)
-        seen = near.any(axis=0)
-        first = np.minimum(first, np.where(seen, tau[np.argmax(near, axis=0)], math.inf))
-        ends = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])
-        last = np.maximum(last, np.where(seen, ends, -math.inf))
+        mode_first, mode_last = first_last(near, tau)
+        first, last = np.minimum(first, mode_first), np.maximum(last, mode_last)
     return first, last
+
+
+def first_last(near: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, last)``: over the time axis (the first) of ``near (T, ...)``, the first and the last
+    time of ``tau (T,)`` [s] that it holds (never: ``inf`` and ``-inf``; at the end: ``last`` inf)."""
+    seen = near.any(axis=0)
+    first = np.where(seen, tau[np.argmax(near, axis=0)], math.inf)
+    last = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])
+    return first, np.where(seen, last, -math.inf)
+
+
+def along_time(samples: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+    """``(T, K, 2)``: the positions ``samples (N+1, K, 2)`` (steps of ``dt`` [s]) at the times ``tau
+    (T,)`` [s], linear in between steps."""
+    n = len(samples)
+    pos = np.clip(tau / dt, 0.0, n - 1)
+    low = np.minimum(np.floor(pos).astype(int), max(n - 2, 0))
+    frac = np.clip(pos - low, 0.0, 1.0)[:, None, None]
+    return samples[low] * (1.0 - frac) + samples[np.minimum(low + 1, n - 1)] * frac
 
 
 def stretch_distance(stretch: Any, points: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
@@ -172,10 +189,7 @@ def stretch_distance(stretch: Any, points: np.ndarray, tau: np.ndarray, dt: floa
     in between steps, less half their spacing and how far across it may stray."""
     samples = np.asarray(stretch.points, dtype=float)  # (N+1, count, 2)
     n = len(samples)
-    pos = np.clip(tau / dt, 0.0, n - 1)
-    low = np.minimum(np.floor(pos).astype(int), n - 2) if n > 1 else np.zeros(len(tau), dtype=int)
-    frac = (pos - low)[:, None, None] if n > 1 else np.zeros((len(tau), 1, 1))
-    at = samples[low] * (1.0 - frac) + samples[np.minimum(low + 1, n - 1)] * frac  # (T, count, 2)
+    at = along_time(samples, tau, dt)  # (T, count, 2)
     steps_along = np.linalg.norm(np.diff(samples, axis=1), axis=-1)
     spacing = float(steps_along.max()) if steps_along.size else 0.0
     across = np.interp(tau, np.arange(n) * dt, np.asarray(stretch.across, dtype=float))
@@ -193,17 +207,10 @@ def track_apart(
     samples = np.asarray(stretch.points, dtype=float)  # (N+1, K, 2)
     n = len(samples)
     tau = np.linspace(0.0, (n - 1) * dt, max((n - 1) * SUBSTEPS, 0) + 1)
-    pos = tau / dt
-    low = np.minimum(np.floor(pos).astype(int), max(n - 2, 0))
-    frac = np.clip(pos - low, 0.0, 1.0)[:, None, None]
-    at = samples[low] * (1.0 - frac) + samples[np.minimum(low + 1, n - 1)] * frac  # (T, K, 2)
+    at = along_time(samples, tau, dt)  # (T, K, 2)
     across = np.interp(tau, np.arange(n) * dt, np.asarray(stretch.across, dtype=float))
     gap = np.linalg.norm(points[None, :, None, :] - at[:, None, :, :], axis=-1)  # (T, J, K)
-    near = gap - across[:, None, None] < reach
-    seen = near.any(axis=0)  # (J, K)
-    first = np.where(seen, tau[np.argmax(near, axis=0)], math.inf)
-    last = np.where(near[-1], math.inf, tau[len(tau) - 1 - np.argmax(near[::-1], axis=0)])
-    last = np.where(seen, last, -math.inf)
+    first, last = first_last(gap - across[:, None, None] < reach, tau)  # (J, K) each
     apart = np.maximum(first - ego_out[:, None], ego_in[:, None] - last)  # (J, K)
     return apart.min(axis=0)
 
