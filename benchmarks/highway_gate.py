@@ -91,6 +91,8 @@ def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
     gate, _ = make_gate(settings, predictor, scenario, env)
     route = RoutePath.of_vehicle(base.road.network, base.vehicle, DESTINATION)
     gate.reset(route, scenario)
+    # the ego that goes at once: our ego's acceleration and speed, as the gate judges it, or highway-env's
+    future_driver = (gate.accel, gate.speed_cap) if args.future_ego == "planner" else (None, None)
     rows: list[dict[str, Any]] = []
     action = np.zeros(2, dtype=np.float32)
     for step in range(int(round(args.duration / gate.dt))):
@@ -104,9 +106,7 @@ def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
             gate.committed, gate.last = False, type(gate.last)(False, False)
             verdict = gate.decide(progress, float(ego.speed), others, signals)
             future = copy.deepcopy(base)
-            ours = args.future_ego == "planner"  # our ego's acceleration and speed, as the gate judges it
-            accel, cap = (gate.accel, gate.speed_cap) if ours else (None, None)
-            put_ego(future, scheduled_vehicle(future, 0, DESTINATION, accel, cap))
+            put_ego(future, scheduled_vehicle(future, 0, DESTINATION, *future_driver))
             crashed, _ = outcome(future, DESTINATION)
             rows.append(
                 {

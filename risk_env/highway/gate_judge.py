@@ -183,18 +183,23 @@ def along_time(samples: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
     return samples[low] * (1.0 - frac) + samples[np.minimum(low + 1, n - 1)] * frac
 
 
+def stretch_gaps(stretch: Any, points: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+    """``(T, J, K)``: the distance [m] from each of ``points (J, 2)`` to each sample of ``stretch``
+    at the times ``tau (T,)`` [s] (steps of ``dt``, linear in between), less how far across the
+    road user may stray."""
+    samples = np.asarray(stretch.points, dtype=float)  # (N+1, K, 2)
+    at = along_time(samples, tau, dt)  # (T, K, 2)
+    across = np.interp(tau, np.arange(len(samples)) * dt, np.asarray(stretch.across, dtype=float))
+    return np.linalg.norm(points[None, :, None, :] - at[:, None, :, :], axis=-1) - across[:, None, None]
+
+
 def stretch_distance(stretch: Any, points: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
     """``(T, J)``: the least distance [m] from each of ``points (J, 2)`` to where a road user's
-    centre may be at each time ``tau (T,)`` [s] (steps of ``dt``): its stretch's samples, linear
-    in between steps, less half their spacing and how far across it may stray."""
-    samples = np.asarray(stretch.points, dtype=float)  # (N+1, count, 2)
-    n = len(samples)
-    at = along_time(samples, tau, dt)  # (T, count, 2)
-    steps_along = np.linalg.norm(np.diff(samples, axis=1), axis=-1)
+    centre may be at each time ``tau (T,)`` [s] (steps of ``dt``): :func:`stretch_gaps` over the
+    stretch's samples, less half their spacing."""
+    steps_along = np.linalg.norm(np.diff(np.asarray(stretch.points, dtype=float), axis=1), axis=-1)
     spacing = float(steps_along.max()) if steps_along.size else 0.0
-    across = np.interp(tau, np.arange(n) * dt, np.asarray(stretch.across, dtype=float))
-    gap = np.linalg.norm(points[None, :, None, :] - at[:, None, :, :], axis=-1).min(axis=-1)
-    return gap - spacing / 2.0 - across[:, None]
+    return stretch_gaps(stretch, points, tau, dt).min(axis=-1) - spacing / 2.0
 
 
 def track_apart(
@@ -204,13 +209,9 @@ def track_apart(
     ``points (J, 2)`` of $\max(t^o_{in,j} - t^e_{out,j}, t^e_{in,j} - t^o_{out,j})$ [s], the time by
     which it and the ego (at point $j$ from ``ego_in`` to ``ego_out``, each ``(J,)``) keep apart
     (below the gate's margin: a conflict); ``reach`` [m] is the gate's clearance."""
-    samples = np.asarray(stretch.points, dtype=float)  # (N+1, K, 2)
-    n = len(samples)
+    n = len(stretch.points)
     tau = np.linspace(0.0, (n - 1) * dt, max((n - 1) * SUBSTEPS, 0) + 1)
-    at = along_time(samples, tau, dt)  # (T, K, 2)
-    across = np.interp(tau, np.arange(n) * dt, np.asarray(stretch.across, dtype=float))
-    gap = np.linalg.norm(points[None, :, None, :] - at[:, None, :, :], axis=-1)  # (T, J, K)
-    first, last = first_last(gap - across[:, None, None] < reach, tau)  # (J, K) each
+    first, last = first_last(stretch_gaps(stretch, points, tau, dt) < reach, tau)  # (J, K) each
     apart = np.maximum(first - ego_out[:, None], ego_in[:, None] - last)  # (J, K)
     return apart.min(axis=0)
 

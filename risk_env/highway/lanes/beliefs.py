@@ -147,15 +147,14 @@ def mode_beliefs(
     candidates = np.stack([route.heading(s_mean), route.heading((s_lo + s_hi) / 2)])  # (2, N+1)
     c, si = np.cos(candidates)[..., None], np.sin(candidates)[..., None]
     along = c * points[None, ..., 0] + si * points[None, ..., 1]  # (2, N+1, count) in each frame
-    across = c * points[None, ..., 1] - si * points[None, ..., 0]
+    side = c * points[None, ..., 1] - si * points[None, ..., 0]
     if fitted:  # about the stretch's extent: the centre's offset from the mean in each frame
-        mid_x, mid_y = (along.max(-1) + along.min(-1)) / 2, (across.max(-1) + across.min(-1)) / 2
+        mid_x, mid_y = (along.max(-1) + along.min(-1)) / 2, (side.max(-1) + side.min(-1)) / 2
     else:
         mid_x = mid_y = np.zeros(along.shape[:2])
+    turn = margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)  # (N+1,)
     half_x = np.abs(along - mid_x[..., None]).max(axis=-1)
-    half_y = np.abs(across - mid_y[..., None]).max(axis=-1) + spread.margin_across
-    across = spread.margin_across + margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)
-    half_y = half_y + (across - spread.margin_across)[None, :]
+    half_y = np.abs(side - mid_y[..., None]).max(axis=-1) + spread.margin_across + turn[None, :]
     best = np.argmin(half_x * half_y, axis=0)  # (N+1,): the smaller box
     columns = np.arange(steps + 1)
     frame, half_x, half_y = candidates[best, columns], half_x[best, columns], half_y[best, columns]
@@ -174,7 +173,7 @@ def mode_beliefs(
     belief = lane_belief(
         mean[:, 0], mean[:, 1], heading, v_mean, sigma_x, sigma_y, sigma_v, half_x, half_y, v_lo, v_hi, frame
     )
-    return belief, Stretch(on_route, across)
+    return belief, Stretch(on_route, spread.margin_across + turn)
 
 
 def lane_belief(
