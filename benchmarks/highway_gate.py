@@ -13,13 +13,17 @@ whole episode (the hindsight reference's driver told never to go,
   ``--predictor``, with ``--clearance``, ``--margin`` and, with ``--given-ego``, the others
   predicted given that the ego goes) whether it would let the ego go now, and
 - **the future**: a copy of the simulator (the traffic's random draws included) in which the ego
-  goes now and drives on to the episode's end (highway-env's IDM on its route, never yielding;
-  with ``--future-ego planner`` at the planners' acceleration and reference speed, which the gate
-  assumes, instead of highway-env's traffic's): whether it comes through without a collision
-  (*free*).
+  goes now and drives on to the episode's end (the env's 13 s, whatever ``--duration``), or with
+  ``--lookahead`` for that many seconds whatever the episode's length (highway-env's IDM on its
+  route, never yielding; with ``--future-ego planner`` at the planners' acceleration and reference
+  speed, which the gate assumes, instead of highway-env's traffic's): whether it has no collision
+  (*free*), and whether it reaches the goal without one (*through*; a free ego may also stand in
+  the junction, locked with a crossing car, or behind a wreck).
 
-``gate.md`` has, per configuration: the steps judged, the free ones, the steps the gate opened,
-and the openings at a step where going collided (*bad*: a gate that is right never has one);
+``gate.md`` has, per configuration: the steps judged, the free and the through ones, the steps the
+gate opened, and the openings at a step where going collided (*bad*: a gate that is right never
+has one); a copy cut at the episode's end judges its last steps over less time, so that
+``--lookahead`` (10 s or more: the ego crosses in about 5) is the fairer judge;
 ``gate.csv`` has every judged step. A gate that opens at few of the free steps keeps the ego
 waiting where it could have gone: the planners' deadlocks (see the highway docs).
 """
@@ -46,7 +50,7 @@ AT_LINE = 10.0
 DESTINATION = "o1"
 """The ego's destination: ``intersection-v2``'s (a left turn)."""
 FILES = ("gate.csv", "gate.md")
-FIELDS = ("seed", "step", "time_s", "free", "open", "slack_s")
+FIELDS = ("seed", "step", "time_s", "free", "through", "open", "slack_s")
 FUTURE_EGOS = {
     "idm": "highway-env's IDM, with its traffic's acceleration, up to the lanes' limit",
     "planner": "an IDM with the acceleration and the speed the gate assumes for the ego (the planners')",
@@ -107,13 +111,16 @@ def judge_episode(seed: int, args: Any) -> list[dict[str, Any]]:
             verdict = gate.decide(progress, float(ego.speed), others, signals)
             future = copy.deepcopy(base)
             put_ego(future, scheduled_vehicle(future, 0, DESTINATION, *future_driver))
-            crashed, _ = outcome(future, DESTINATION)
+            if args.lookahead is not None:
+                future.config["duration"] = float(base.time) + args.lookahead
+            crashed, goal = outcome(future, DESTINATION)
             rows.append(
                 {
                     "seed": seed,
                     "step": step,
                     "time_s": float(base.time),
                     "free": not crashed,
+                    "through": goal and not crashed,
                     "open": not verdict.closed,
                     "slack_s": float(verdict.slack),
                 }
@@ -137,9 +144,13 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
     free = sum(r["free"] for r in rows)
     opened = sum(r["open"] for r in rows)
     good = sum(r["open"] and r["free"] for r in rows)
+    through = sum(r["through"] for r in rows)
+    passed = sum(r["open"] and r["through"] for r in rows)
     bad = sum(r["open"] and not r["free"] for r in rows)
 
     def rate(k: int, n: int) -> str:
+        if n == 0:
+            return f"{k} (of none)"
         lo, hi = wilson(k, n)
         return f"{k} ({100 * k / max(n, 1):.1f}% [{100 * lo:.1f}, {100 * hi:.1f}])"
 
@@ -149,7 +160,8 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
         [
             f"`{command}`",
             "",
-            f"intersection-v2, seeds {args.seed}..{args.seed + args.episodes - 1}, {args.duration:g} s;"
+            f"intersection-v2, seeds {args.seed}..{args.seed + args.episodes - 1}, {args.duration:g} s"
+            f"{'' if args.lookahead is None else f', going at once judged over {args.lookahead:g} s'};"
             f" the ego waits at the line; predictor {args.predictor} (interval switches: {switches}),"
             f" clearance {args.clearance:g} m, margin {args.margin:g} s, others predicted"
             f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}"
@@ -158,12 +170,14 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
             f" {closing}. Going at once: {FUTURE_EGOS[args.future_ego]}."
             " Wall time"
             f" {wall:.0f} s. Rates: of the steps judged (free, opened) or of the free steps (opened"
-            " where free) [Wilson 95 %].",
+            " where free) or of the through steps (opened where through) [Wilson 95 %].",
             "",
-            "| steps judged | free (going at once collision-free) | gate open | open where free"
-            " | open where going collided |",
-            "| --- | --- | --- | --- | --- |",
-            f"| {judged} | {rate(free, judged)} | {rate(opened, judged)} | {rate(good, free)} | {bad} |",
+            "| steps judged | free (going at once collision-free) | through (going at once reaches the"
+            " goal, collision-free) | gate open | open where free | open where through | open where"
+            " going collided |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+            f"| {judged} | {rate(free, judged)} | {rate(through, judged)} | {rate(opened, judged)} |"
+            f" {rate(good, free)} | {rate(passed, through)} | {bad} |",
             "",
         ]
     )
@@ -180,6 +194,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=cli.nonnegative_int, default=0, help="first seed")
     parser.add_argument(
         "--duration", type=cli.positive_float, default=13.0, help="episode length [s] (highway-env's 13)"
+    )
+    parser.add_argument(
+        "--lookahead",
+        type=cli.positive_float,
+        default=None,
+        help="judge going at once over this many seconds [s] from each step, whatever the episode's"
+        " length (default: to the episode's end)",
     )
     parser.add_argument("--predictor", choices=HIGHWAY_PREDICTORS, default="lane+interval", help="the gate's")
     add_interval_option(parser)

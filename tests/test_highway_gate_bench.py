@@ -39,6 +39,21 @@ def test_a_short_run_judges_the_steps_at_the_line_and_tables_them(tmp_path, monk
     assert "turn signals read" in text and "mean car" in text and "above a conflict chance of 0.1" in text
 
 
+def test_a_lookahead_judges_going_at_once_over_its_own_time(tmp_path, monkeypatch):
+    """Seed 5: the ego reaches the line at 4 s and, going at once, the goal before the episode's end
+    (13 s, the env's) at both steps judged; over a lookahead of 1 s it cannot reach it."""
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    argv = ["--episodes", "1", "--seed", "5", "--duration", "5", "--workers", "1", "--given-ego"]
+    whole = highway_gate.main([*argv, "--out", str(tmp_path / "whole")])
+    short = highway_gate.main([*argv, "--lookahead", "1", "--out", str(tmp_path / "short")])
+    assert [r["step"] for r in whole] == [r["step"] for r in short] and len(whole) == 2
+    assert all(r["through"] and r["free"] for r in whole)
+    assert not any(r["through"] for r in short)
+    assert "| 2 | 2 (100.0% [" in (tmp_path / "whole" / "gate.md").read_text()
+    text = (tmp_path / "short" / "gate.md").read_text()
+    assert "going at once judged over 1 s" in text and "| 0 (of none) |" in text  # opened where through
+
+
 def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
     with pytest.raises(SystemExit):
         highway_gate.main(["--predictor", "lane", "--interval", "split_yield", "--out", str(tmp_path)])
@@ -49,6 +64,9 @@ def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
     with pytest.raises(SystemExit):
         highway_gate.main(["--predictor", "constant", "--signals", "--out", str(tmp_path)])
     assert "--signals needs a lane predictor" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        highway_gate.main(["--lookahead", "-1", "--out", str(tmp_path)])
+    assert "--lookahead" in capsys.readouterr().err
 
 
 def test_the_header_names_every_judge():
