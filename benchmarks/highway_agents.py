@@ -217,7 +217,7 @@ def body_overrides(args: argparse.Namespace) -> dict[str, Any]:
     return {f"{who}_{k}": v for who in ("ego", "object") for k, v in body.items()}
 
 
-INTERVAL_SWITCHES = ("split_yield", "centred", "fitted", "yield_to_ego")
+INTERVAL_SWITCHES = ("split_yield", "centred", "fitted", "yield_to_ego", "ego_ahead")
 """The interval prediction's switches a benchmark's ``--interval`` may turn on
 (:class:`~risk_env.highway.lanes.interval.IntervalModel`'s bool fields of these names)."""
 
@@ -245,7 +245,9 @@ def add_interval_option(parser: argparse.ArgumentParser) -> None:
         " held or free, weighted by the yielding rule), centred (each box centred on its interval),"
         " fitted (each box the tightest in its frame, about the stretch it holds: on a curve no longer"
         " as far outside the arc as inside it),"
-        " yield_to_ego (no box runs through a standing ego from one that follows it or yields to it)",
+        " yield_to_ego (no box runs through a standing ego from one that follows it or yields to it),"
+        " ego_ahead (the fast runs brake for the ego on every lane highway-env's connected search"
+        " covers)",
     )
 
 

@@ -64,6 +64,7 @@ JUDGED = {
     "near": "truncation boxes over the MPCs' 3 s horizon and mean car after",
     "stretch": "stretch of its route over the MPCs' 3 s horizon and mean car after",
     "tracks": "tracks along the stretch of its route, each a share of its weight",
+    "rollout": "part in the scene rolled out with the ego going, the gate open if the ego comes through",
 }
 """How the table's header names each judge's view of a mode."""
 

@@ -20,8 +20,15 @@ from benchmarks import prediction as bench  # noqa: E402
 from benchmarks import prediction_samples as samples  # noqa: E402
 from risk_env.highway import LaneMode, LanePredictor, make_intersection_env, vehicle_measurement  # noqa: E402
 from risk_env.highway.lanes.beliefs import Spread  # noqa: E402
-from risk_env.highway.lanes.routes import Route, lane_coordinates, lane_headings, lane_points, routes_from  # noqa: E402
-from risk_env.highway.lanes.speed import TrafficModel, reach, rectangles_intersect  # noqa: E402
+from risk_env.highway.lanes.routes import (  # noqa: E402
+    Route,
+    lane_coordinates,
+    lane_headings,
+    lane_points,
+    rectangles_intersect,  # noqa: E402
+    routes_from,
+)
+from risk_env.highway.lanes.speed import TrafficModel, reach  # noqa: E402
 from risk_env.highway.lanes.table import LaneTable  # noqa: E402
 from risk_env.highway.lanes.weights import WeightModel  # noqa: E402
 from risk_env.models.frame import to_frame  # noqa: E402

@@ -206,3 +206,26 @@ def test_the_gate_predicts_the_others_given_that_the_ego_goes(network):
         gate.decide(90.0, 0.0, np.array([measurement(network, ("o1", "ir1", 0), 60.0, 8.0)]))
     assert seen[0] == EgoPlan(lanes, 3.0, 8.0) and seen[1] is None
     assert dataclasses.replace(seen[0], speed=9.0) != seen[0]
+
+
+def test_with_ego_ahead_the_fast_run_brakes_for_an_ego_in_the_junction(network):
+    """An ego standing 8 m into the junction, on the straight lane a road user's approach leads to:
+    highway-env's traffic brakes for it (its connected search finds it on the next lane), and so
+    does every run with ``ego_ahead``; without it the fast run, which searches the own lane only,
+    drives through the ego."""
+    ego = measurement(network, ("ir1", "il3", 0), 8.0, 0.0)
+    follower = measurement(network, ("o1", "ir1", 0), 82.0, 8.0)
+    heading = float(follower[2])
+    direction = np.array([np.cos(heading), np.sin(heading)])
+    ego_rear = float(ego[:2] @ direction) - 2.5
+
+    def front(switch: bool) -> float:
+        intervals = IntervalModel(centred=True, ego_ahead=switch)
+        predictor = LanePredictor(network, T, longitudinal="interval", intervals=intervals, ego=lambda: ego)
+        mixture = predictor.predict_scene(follower[None], STEPS)[0]
+        return max(along(mode.beliefs, n, heading)[1] for mode in mixture.modes for n in range(STEPS + 1))
+
+    assert front(False) > ego_rear + 2.0
+    assert front(True) < ego_rear
+    with pytest.raises(TypeError, match="ego_ahead"):
+        IntervalModel(ego_ahead=1)

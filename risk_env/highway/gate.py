@@ -69,6 +69,7 @@ from risk_env.highway.gate_judge import (
 )
 from risk_env.highway.lane_agents import lane_scenario
 from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
+from risk_env.highway.lanes.rollout import roll_out
 from risk_env.highway.predictors import (
     MATCH,
     SIGNAL_MATCH,
@@ -190,6 +191,8 @@ class JunctionGate:
         self.margin, self.threshold = float(margin), float(threshold)
         self.judge = checks.text("judge", judge, JUDGES)
         """How a mode is judged (:mod:`~risk_env.highway.gate_judge`)."""
+        if self.judge == "rollout" and not (isinstance(predictor, LanePredictor) and predictor.ego):
+            raise GateError("the rollout judge needs the lane+interval predictor with an ego")
         if not (isinstance(tolerance, (int, float)) and 0.0 <= tolerance < 1.0):
             raise GateError(f"tolerance must lie in [0, 1), got {tolerance!r}")
         self.tolerance = float(tolerance)
@@ -252,6 +255,11 @@ class JunctionGate:
             return self.last
         if left > GATE_RANGE or not len(others):
             self.last = GateDecision(False, False)
+            return self.last
+        if self.judge == "rollout":  # the scene rolled out with the ego going (lanes.rollout)
+            through = roll_out(self.predictor, np.asarray(others, dtype=float), self._plan(), signals).through
+            self.closed_steps += not through
+            self.last = GateDecision(not through, False, math.inf if through else -math.inf)
             return self.last
         s = np.arange(s_in, s_out + 1e-9, 1.0)
         points = self.route.position(s)

@@ -26,6 +26,12 @@ r"""How the junction gate judges a vehicle's prediction (:class:`~risk_env.highw
   steps they alone closed it). A mode without one (the paper's predictor, the gate's virtual
   object) is judged by its box up to the step before, by its mean car from that step.
 
+- ``"rollout"``: no mode is judged; the whole scene is rolled out with the ego going now, every
+  road user reacting to every other, and the gate opens when the ego comes through
+  (:mod:`~risk_env.highway.lanes.rollout`; the lane+interval predictor with an ego only; the gate's
+  clearance, margin, threshold and tolerance do not apply, its slack is inf when open and -inf
+  when closed).
+
 A mode conflicts when it occupies a point while the ego would be there, with the gate's margin to
 spare. With ``tolerance`` 0 the gate closes when any counted mode of any vehicle conflicts; above
 0, when the chance of a conflict, $1 - \prod_v (1 - \sum_{m \text{ of } v \text{ conflicting}} w_m)$
@@ -54,7 +60,7 @@ GATE_THRESHOLD = 0.05
 """Weight of a vehicle's route hypothesis from which the gate reckons with it."""
 SUBSTEPS = 4
 """Time samples per prediction step (positions linear in between)."""
-JUDGES = ("boxes", "footprint", "near", "stretch", "tracks")
+JUDGES = ("boxes", "footprint", "near", "stretch", "tracks", "rollout")
 """The gate's ways of judging a mode (module docstring)."""
 
 

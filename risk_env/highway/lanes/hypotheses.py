@@ -4,6 +4,7 @@ prediction given what the ego will do)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +24,25 @@ class Hypotheses:
     weights: np.ndarray
     groups: list[list[int]]
     labels: list[str]
+
+
+@dataclass
+class Scene:
+    """Every road user's route hypotheses as the speed model's agents
+    (:meth:`LanePredictor.scene <risk_env.highway.lanes.predictor.LanePredictor.scene>`)."""
+
+    rows: np.ndarray
+    """``(m, 5)``: the road users' measurements, the ego's last when it takes part."""
+    users: int
+    """How many road users are predicted (the ego, when it takes part, is row ``users``)."""
+    hypotheses: list[Hypotheses | None]
+    """Each row's route hypotheses (None: off the road)."""
+    agents: Agents
+    """Their routes as the speed model's agents."""
+    is_ego: np.ndarray
+    """``(A,)`` bool: the agents of the ego."""
+    motion: tuple[float, float] | None
+    """The ego's ``(accel, speed)`` [m/s², m/s] in a prediction given its plan, else None."""
 
 
 @dataclass(frozen=True)
@@ -91,3 +111,24 @@ def agents_of(rows: np.ndarray, hypotheses: list[Hypotheses | None]) -> Agents:
         np.array(rep, dtype=bool),
         np.array(weight, float),
     )
+
+
+def per_user(name: str, values: Any, count: int) -> list[Any]:
+    """``values`` (one per road user, or None for all None) as a list of ``count``."""
+    if values is None:
+        return [None] * count
+    values = list(values)
+    if len(values) != count:
+        raise ValueError(f"{name} must have one entry per road user ({count}), got {len(values)}")
+    return values
+
+
+def turn_signal(signal: Any) -> np.ndarray | None:
+    """An observed turn signal ``(2,)`` as a unit vector (None: none, or a zero one)."""
+    if signal is None:
+        return None
+    vector = np.asarray(signal, dtype=float).reshape(-1)
+    if vector.shape != (2,):
+        raise ValueError(f"a turn signal must be a vector (2,), got {checks.describe(signal)}")
+    norm = float(np.hypot(*vector))
+    return None if not np.isfinite(norm) or norm < 1e-9 else vector / norm

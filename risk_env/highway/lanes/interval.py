@@ -19,7 +19,8 @@ interval through the IDM with its parameters in a box, each road user's routes a
   replaces it by one far away, which no prediction sees coming, so the upper bound does without
   those leaders; nobody yields (:attr:`IntervalModel.upper_yields` False), unless asked to apply
   the regulation's rule as the mean does; the ego (when the predictor is given one) brakes fully
-  (:attr:`IntervalModel.ego_leads`), so that no box of a road user behind it reaches through it;
+  (:attr:`IntervalModel.ego_leads`), so that no box of a road user behind it reaches through it,
+  and with :attr:`IntervalModel.ego_ahead` it is found on every lane of the connected search;
 - **slow** (the lower bound): $\delta$ at the bottom of its range and the desired speed at the
   measured speed (a vehicle that does not yield never wants less than it drives), behind the
   nearest of every route hypothesis of every other road user, and yielding to any of them under
@@ -107,6 +108,11 @@ class IntervalModel:
     behind the ego on its lane is then bounded behind an ego that stops, so that no box of it
     reaches through the ego, whatever the ego plans (when the ego drives on, that road user may
     pass its box, but behind the ego)."""
+    ego_ahead: bool = False
+    """Whether the runs whose leader search keeps to the road user's own lane (the fast ones) still
+    take the ego for a leader on every lane highway-env's connected search covers (the lanes the
+    graph joins before and after it, within a metre of their edges): its traffic brakes for an ego
+    that stands or drives in the junction ahead of its approach, which those runs drove through."""
 
     def __post_init__(self) -> None:
         low, high = (float(x) for x in self.delta)
@@ -124,6 +130,7 @@ class IntervalModel:
             "centred",
             "fitted",
             "yield_to_ego",
+            "ego_ahead",
         )
         for name in switches:
             if not isinstance(getattr(self, name), bool):
@@ -134,7 +141,7 @@ def lane_only(model: SpeedModel) -> SpeedModel:
     """``model`` with highway-env's leader search on the road user's own lane only (the fast run's)."""
     if not model.model.connected_lanes:
         return model
-    return SpeedModel(model.network, model.model, LaneTable(model.network, connected=False))
+    return SpeedModel(model.network, model.model, LaneTable(model.network, connected=False), model.table)
 
 
 HELD_GAP = 1.0
@@ -205,7 +212,12 @@ def interval_bounds(
     going = ego_motion is not None
     fast_ego = ego if (intervals.ego_leads or going) else none
     ego_rule = {"script": ego_motion, "exempt": ego if going else None}
-    fast_options = {"delta": np.full(count, high), "target": np.full(count, np.inf), "scripted": fast_ego}
+    fast_options = {
+        "delta": np.full(count, high),
+        "target": np.full(count, np.inf),
+        "scripted": fast_ego,
+        "wide": ego if intervals.ego_ahead else None,
+    }
     fast = lane_model.run(
         agents,
         steps,

@@ -1,15 +1,18 @@
-"""The lane predictor's modes: :class:`LaneMode`, and a route mode's parts, whole or held and
-free (:class:`~risk_env.highway.lanes.interval.IntervalBounds`)."""
+"""The lane predictor's modes: :class:`LaneMode`, a route mode's parts, whole or held and
+free (:class:`~risk_env.highway.lanes.interval.IntervalBounds`), and a road user's mixture of them
+(:func:`lane_mixture`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from risk_env.highway.lanes.beliefs import Stretch
+from risk_env.highway.lanes.beliefs import Stretch, mode_beliefs
+from risk_env.highway.lanes.hypotheses import Hypotheses
 from risk_env.highway.lanes.interval import IntervalBounds
-from risk_env.prediction.mixture import Mode
+from risk_env.prediction.mixture import Mixture, Mode
 
 SPLIT_MIN = 1e-3
 """A held or free part of a mode less likely than this (within the mode) is left out."""
@@ -53,3 +56,53 @@ def mode_parts(
         v_in = np.where((v[group] >= v_lo) & (v[group] <= v_hi), v[group], (v_lo + v_hi) / 2)
         out.append((suffix, weight, s_in, v_in, [lo, hi, v_lo, v_hi]))
     return out
+
+
+def lane_mixture(
+    predictor: Any,
+    row: np.ndarray,
+    hyp: Hypotheses,
+    s: np.ndarray,
+    v: np.ndarray,
+    bounds: IntervalBounds | None,
+) -> Mixture:
+    """The mixture of one road user of the lane predictor ``predictor``
+    (:class:`~risk_env.highway.lanes.predictor.LanePredictor`, whose numbers it reads): its
+    modes from its routes' arc lengths and speeds ``(R, N+1)`` (and their interval bounds,
+    :func:`~risk_env.highway.lanes.interval.interval_bounds`, or None)."""
+    modes = []
+    for group, label in zip(hyp.groups, hyp.labels, strict=True):
+        w = hyp.weights[group]
+        total = float(w.sum())
+        lead = group[int(np.argmax(w))]
+        share = w / total if total > 0 else np.full(len(group), 1.0 / len(group))
+        for suffix, part, s_b, v_b, box in mode_parts(group, share, s, v, bounds):
+            routes = tuple(
+                (hyp.routes[k].label(), float(hyp.weights[k]) * part / predictor.pieces) for k in group
+            )
+            for j in range(predictor.pieces):
+                beliefs, stretch = mode_beliefs(
+                    predictor.spread,
+                    hyp.routes[lead],
+                    s_b,
+                    v_b,
+                    share,
+                    float(hyp.starts[lead]),
+                    float(hyp.offsets[lead]),
+                    float(row[3]),
+                    predictor.dt,
+                    predictor.traffic.max_acceleration,
+                    predictor.traffic.lateral_time,
+                    (j, predictor.pieces),
+                    box,
+                    0.0 if bounds is None else predictor.intervals.margin_turn,
+                    predictor.intervals.centred,
+                    predictor.intervals.fitted,
+                )
+                name = label + suffix + ("" if predictor.pieces == 1 else f"#{j + 1}/{predictor.pieces}")
+                modes.append((total * part / predictor.pieces, beliefs, name, routes, stretch))
+    norm = sum(m[0] for m in modes)
+    share = 1.0 / predictor.pieces
+    return Mixture(
+        tuple(LaneMode(w / norm, b, label, share, routes=r, stretch=st) for w, b, label, r, st in modes)
+    )

@@ -49,16 +49,23 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import SPEED_BOUND
-from risk_env.highway.lanes.beliefs import Spread, mode_beliefs
-from risk_env.highway.lanes.hypotheses import EgoPlan, Hypotheses, agents_of, planned
+from risk_env.highway.lanes.beliefs import Spread
+from risk_env.highway.lanes.hypotheses import (
+    EgoPlan,
+    Hypotheses,
+    Scene,
+    agents_of,
+    per_user,
+    planned,
+    turn_signal,
+)
 from risk_env.highway.lanes.interval import (
     LONGITUDINAL,
-    IntervalBounds,
     IntervalModel,
     interval_bounds,
     lane_only,
 )
-from risk_env.highway.lanes.modes import LaneMode, mode_parts
+from risk_env.highway.lanes.modes import LaneMode, lane_mixture  # noqa: F401 (LaneMode: exported here too)
 from risk_env.highway.lanes.routes import Route, check_lane, lane_distance, next_lanes, routes_from, wrap
 from risk_env.highway.lanes.speed import SpeedModel, TrafficModel, reach
 from risk_env.highway.lanes.table import ON_LANE_MARGIN
@@ -203,32 +210,14 @@ class LanePredictor(Predictor):
         and an ``ego``, the prediction given that the ego drives so (:class:`EgoPlan`: on its
         route, never yielding, the others reacting to it as highway-env's traffic does) instead of
         braking."""
-        rows = np.asarray(measurements, dtype=float)
-        if rows.ndim != 2 or rows.shape[1] != 5 or not np.all(np.isfinite(rows)):
-            raise ValueError(
-                f"measurements must be finite, of shape (m, 5), got {checks.describe(measurements)}"
-            )
-        steps = checks.integer("steps", steps, minimum=0)
-        lanes = self._per_user("lanes", lanes, len(rows))
-        signals = self._per_user("signals", signals, len(rows))
-        users = len(rows)
-        ego = None if self.ego is None else self.ego()
-        if ego is not None:  # the ego takes part in the scene, predicted for nobody
-            ego = np.asarray(checks.finite_reals("the ego's measurement", ego, 5), dtype=float)
-            rows, lanes, signals = np.vstack([rows, ego]), [*lanes, None], [*signals, None]
-        lanes = [None if lane is None else check_lane(self.network, lane) for lane in lanes]
-        along, across = self.speed_model.table.locate(rows[:, :2])
-        hypotheses = [
-            self._hypotheses(
-                row, steps, lane, None if signal is None else self._signal(signal), along[:, i], across[:, i]
-            )
-            for i, (row, lane, signal) in enumerate(zip(rows, lanes, signals, strict=True))
-        ]
-        if ego is not None and ego_plan is not None and hypotheses[-1] is not None:
-            hypotheses[-1] = planned(hypotheses[-1], ego_plan)
-        motion = None if ego is None or ego_plan is None else (float(ego_plan.accel), float(ego_plan.speed))
-        agents = agents_of(rows, hypotheses)
-        is_ego = agents.vehicle == users if ego is not None else np.zeros(len(agents.vehicle), dtype=bool)
+        scene = self.scene(measurements, steps, lanes, signals, ego_plan)
+        rows, hypotheses, agents, is_ego, motion = (
+            scene.rows,
+            scene.hypotheses,
+            scene.agents,
+            scene.is_ego,
+            scene.motion,
+        )
         s, v = (
             self.speed_model.run(
                 agents,
@@ -256,37 +245,55 @@ class LanePredictor(Predictor):
             )
         out: list[Mixture] = []
         first = 0
-        self.predicted += users
-        for row, hyp in zip(rows[:users], hypotheses[:users], strict=True):
+        self.predicted += scene.users
+        for row, hyp in zip(rows[: scene.users], hypotheses[: scene.users], strict=True):
             if hyp is None:
                 self.fallbacks += 1
                 out.append(self.fallback.predict(row, steps))
                 continue
             part = slice(first, first + len(hyp.routes))
             out.append(
-                self._mixture(row, hyp, s[part], v[part], None if bounds is None else bounds.part(part))
+                lane_mixture(self, row, hyp, s[part], v[part], None if bounds is None else bounds.part(part))
             )
             first += len(hyp.routes)
         return out
 
+    def scene(
+        self,
+        measurements: Any,
+        steps: int,
+        lanes: Any = None,
+        signals: Any = None,
+        ego_plan: EgoPlan | None = None,
+    ) -> Scene:
+        """Every road user's route hypotheses as the speed model's agents, the ego's among them
+        when the predictor has one (see :meth:`predict_scene`, whose arguments these are)."""
+        rows = np.asarray(measurements, dtype=float)
+        if rows.ndim != 2 or rows.shape[1] != 5 or not np.all(np.isfinite(rows)):
+            raise ValueError(
+                f"measurements must be finite, of shape (m, 5), got {checks.describe(measurements)}"
+            )
+        steps = checks.integer("steps", steps, minimum=0)
+        lanes, signals = per_user("lanes", lanes, len(rows)), per_user("signals", signals, len(rows))
+        users = len(rows)
+        ego = None if self.ego is None else self.ego()
+        if ego is not None:  # the ego takes part in the scene, predicted for nobody
+            ego = np.asarray(checks.finite_reals("the ego's measurement", ego, 5), dtype=float)
+            rows, lanes, signals = np.vstack([rows, ego]), [*lanes, None], [*signals, None]
+        lanes = [None if lane is None else check_lane(self.network, lane) for lane in lanes]
+        along, across = self.speed_model.table.locate(rows[:, :2])
+        hypotheses = [
+            self._hypotheses(row, steps, lane, turn_signal(signal), along[:, i], across[:, i])
+            for i, (row, lane, signal) in enumerate(zip(rows, lanes, signals, strict=True))
+        ]
+        if ego is not None and ego_plan is not None and hypotheses[-1] is not None:
+            hypotheses[-1] = planned(hypotheses[-1], ego_plan)
+        motion = None if ego is None or ego_plan is None else (float(ego_plan.accel), float(ego_plan.speed))
+        agents = agents_of(rows, hypotheses)
+        is_ego = agents.vehicle == users if ego is not None else np.zeros(len(agents.vehicle), dtype=bool)
+        return Scene(rows, users, hypotheses, agents, is_ego, motion)
+
     # ------------------------------------------------------------------ hypotheses
-    @staticmethod
-    def _per_user(name: str, values: Any, count: int) -> list[Any]:
-        if values is None:
-            return [None] * count
-        values = list(values)
-        if len(values) != count:
-            raise ValueError(f"{name} must have one entry per road user ({count}), got {len(values)}")
-        return values
-
-    @staticmethod
-    def _signal(signal: Any) -> np.ndarray | None:
-        vector = np.asarray(signal, dtype=float).reshape(-1)
-        if vector.shape != (2,):
-            raise ValueError(f"a turn signal must be a vector (2,), got {checks.describe(signal)}")
-        norm = float(np.hypot(*vector))
-        return None if not np.isfinite(norm) or norm < 1e-9 else vector / norm
-
     def _route(self, lanes: tuple) -> Route:
         """The route through ``lanes`` (built once per predictor), its turn noted in ``_turns``."""
         route = self._routes.get(lanes)
@@ -354,46 +361,3 @@ class LanePredictor(Predictor):
             groups.setdefault(reached, []).append(k)
         labels = [">".join([key[0][0], *(index[1] for index in key)]) for key in groups]
         return Hypotheses(chosen, located[:, 0], located[:, 1], weights, list(groups.values()), labels)
-
-    # ------------------------------------------------------------------ beliefs
-    def _mixture(
-        self, row: np.ndarray, hyp: Hypotheses, s: np.ndarray, v: np.ndarray, bounds: IntervalBounds | None
-    ) -> Mixture:
-        """The road user's modes from its routes' arc lengths and speeds ``(R, N+1)`` (and their
-        interval bounds, :func:`~risk_env.highway.lanes.interval.interval_bounds`, or None)."""
-        modes = []
-        for group, label in zip(hyp.groups, hyp.labels, strict=True):
-            w = hyp.weights[group]
-            total = float(w.sum())
-            lead = group[int(np.argmax(w))]
-            share = w / total if total > 0 else np.full(len(group), 1.0 / len(group))
-            for suffix, part, s_b, v_b, box in mode_parts(group, share, s, v, bounds):
-                routes = tuple(
-                    (hyp.routes[k].label(), float(hyp.weights[k]) * part / self.pieces) for k in group
-                )
-                for j in range(self.pieces):
-                    beliefs, stretch = mode_beliefs(
-                        self.spread,
-                        hyp.routes[lead],
-                        s_b,
-                        v_b,
-                        share,
-                        float(hyp.starts[lead]),
-                        float(hyp.offsets[lead]),
-                        float(row[3]),
-                        self.dt,
-                        self.traffic.max_acceleration,
-                        self.traffic.lateral_time,
-                        (j, self.pieces),
-                        box,
-                        0.0 if bounds is None else self.intervals.margin_turn,
-                        self.intervals.centred,
-                        self.intervals.fitted,
-                    )
-                    name = label + suffix + ("" if self.pieces == 1 else f"#{j + 1}/{self.pieces}")
-                    modes.append((total * part / self.pieces, beliefs, name, routes, stretch))
-        norm = sum(m[0] for m in modes)
-        share = 1.0 / self.pieces
-        return Mixture(
-            tuple(LaneMode(w / norm, b, label, share, routes=r, stretch=st) for w, b, label, r, st in modes)
-        )

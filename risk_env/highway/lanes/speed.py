@@ -18,7 +18,7 @@ of its ``RegulatedRoad`` (``road/regulation.py``), with the numbers of :class:`T
 - **Yielding**: every ``regulation_period`` (from the measurement on), two road users whose
   constant-speed futures along their routes overlap within ``conflict_horizon`` (rectangles of
   1.5 x length by 0.9 x width, highway-env's ``rotated_rectangles_intersect`` vectorised in
-  :func:`rectangles_intersect`)
+  :func:`~risk_env.highway.lanes.routes.rectangles_intersect`)
   are in conflict; the one on the lane of lower ``priority`` (equal: the one behind) yields, its
   desired speed set to 0 until the next check, and to its lane's speed limit after it.
 - **Desired speed** v0 is not observed: ``max(v, cruise_speed)``, capped by the lane's limit.
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from risk_env.highway.lanes.routes import Route, interpolate
+from risk_env.highway.lanes.routes import Route, interpolate, rectangles_intersect
 from risk_env.highway.lanes.table import LaneTable
 
 NOT_ZERO = 1e-2
@@ -129,6 +129,20 @@ class Agents:
     user); None: all 1 (what :meth:`SpeedModel.run` needs only for its ``yields`` output)."""
 
 
+def _found(
+    table: LaneTable, lane: np.ndarray, coords: np.ndarray, on: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where each of B road users lies on the lanes ``table`` searches from each agent's ``lane``
+    ``(A,)``: its arc length ``(A, B)`` [m] on the first searched lane it is on, put on the agent's
+    lane, and whether it is on any; from its coordinates ``coords`` and ``on`` ``(L, B)``."""
+    search = table.search[lane]  # (A, J)
+    on_search = on[np.maximum(search, 0)] & (search >= 0)[:, :, None]  # (A, J, B)
+    first = np.argmax(on_search, axis=1)  # (A, B): the first lane each one is on
+    hit = np.take_along_axis(search, first, axis=1)
+    s_v = coords[np.maximum(hit, 0), np.arange(on.shape[1])[None, :]]
+    return s_v + np.take_along_axis(table.search_offset[lane], first, axis=1), on_search.any(axis=1)
+
+
 def _not_zero(x: np.ndarray) -> np.ndarray:
     return np.where(np.abs(x) > NOT_ZERO, x, np.where(x >= 0, NOT_ZERO, -NOT_ZERO))
 
@@ -136,11 +150,16 @@ def _not_zero(x: np.ndarray) -> np.ndarray:
 class SpeedModel:
     """Moves :class:`Agents` over the horizon with a :class:`TrafficModel` (module docstring)."""
 
-    def __init__(self, network: Any, model: TrafficModel, table: LaneTable | None = None) -> None:
+    def __init__(
+        self, network: Any, model: TrafficModel, table: LaneTable | None = None, wide: LaneTable | None = None
+    ) -> None:
         self.network = network
         self.model = model
         self.table = LaneTable(network, model.connected_lanes) if table is None else table
         """The lanes' table (``table``: another leader search than ``model.connected_lanes``)."""
+        self.wide = wide
+        """The table whose wider search finds the leaders :meth:`run` is told to seek on it (``wide``),
+        or None."""
 
     def run(
         self,
@@ -156,6 +175,8 @@ class SpeedModel:
         exempt: np.ndarray | None = None,
         yields: np.ndarray | None = None,
         yield_to: np.ndarray | None = None,
+        wide: np.ndarray | None = None,
+        script_follows: bool = False,
     ) -> tuple[np.ndarray, np.ndarray]:
         r"""Arc lengths and speeds ``(A, steps+1)`` of every agent at n = 0..steps (step ``dt`` [s]).
         By default with the model's numbers; the interval prediction sets, per agent, the IDM's
@@ -170,10 +191,12 @@ class SpeedModel:
         at which it yields in this run (0 where it never does): one minus the chance, over the road
         users it yields to, that none of them is on a route it yields to (their routes'
         :attr:`Agents.weight`, independent). ``yield_to`` ``(A,)`` bool: the agents yielded to under
-        the rule (default the partners)."""
+        the rule (default the partners). ``wide`` ``(A,)`` bool: leaders sought on :attr:`wide`'s
+        lanes (ignored without that table). ``script_follows``: the agents with a ``script`` still
+        brake for their leader as the IDM would (an ego that goes and does not drive into anyone)."""
         m, table = self.model, self.table
         count = len(agents.vehicle)
-        samples = _stack([route.samples for route in agents.routes])
+        samples = stack_samples([route.samples for route in agents.routes])
         depth = max(len(route.lanes) for route in agents.routes)
         offsets = np.full((count, depth), np.inf)
         lane_ids = np.zeros((count, depth), dtype=int)
@@ -211,12 +234,13 @@ class SpeedModel:
                     yields[:] = np.where(yields > 0, yields, chance)
                 target = np.where(now, 0.0, np.where(yielded, table.limit[lane], target))
                 yielded = now
-            acceleration = self._idm(agents, v, target, points, heading, lane, local, reps, delta)
+            acceleration = self._idm(agents, v, target, points, heading, lane, local, reps, delta, wide)
             if scripted is not None:
                 if script is None:  # full braking to a stop
                     forced = np.maximum(-m.max_acceleration, (np.minimum(v, 0.0) - v) / h)
                 else:
                     forced = np.clip((script[1] - v) / h, -m.max_acceleration, script[0])
+                    forced = np.minimum(forced, acceleration) if script_follows else forced
                 acceleration = np.where(scripted, forced, acceleration)
             s = s + v * h
             v = v + acceleration * h
@@ -235,21 +259,18 @@ class SpeedModel:
         local: np.ndarray,
         reps: np.ndarray,
         delta: float | np.ndarray | None = None,
+        wide: np.ndarray | None = None,
     ) -> np.ndarray:
         """highway-env's ``IDMVehicle.acceleration`` of every agent behind its leader (``delta``: the
-        exponent, per agent or the model's)."""
+        exponent, per agent or the model's; ``wide``: see :meth:`run`)."""
         m, table = self.model, self.table
         count = len(v)
-        coords, on = table.coordinates(points[reps])  # (L, B)
-        search = table.search[lane]  # (A, J)
-        valid = search >= 0
-        on_search = on[np.maximum(search, 0)] & valid[:, :, None]  # (A, J, B)
-        first = np.argmax(on_search, axis=1)  # (A, B): the first lane each rep is on
-        anywhere = on_search.any(axis=1)
-        lanes_hit = np.take_along_axis(search, first, axis=1)  # (A, B)
-        s_v = coords[np.maximum(lanes_hit, 0), np.arange(len(reps))[None, :]] + np.take_along_axis(
-            table.search_offset[lane], first, axis=1
-        )
+        coords, on = table.coordinates(points[reps])  # (L, B); the same lanes in every table
+        s_v, anywhere = _found(table, lane, coords, on)
+        if wide is not None and self.wide is not None and wide[reps].any():
+            s_wide, any_wide = _found(self.wide, lane, coords, on)
+            s_v = np.where(wide[reps][None, :], s_wide, s_v)
+            anywhere = np.where(wide[reps][None, :], any_wide, anywhere)
         candidate = (
             anywhere & (agents.vehicle[reps][None, :] != agents.vehicle[:, None]) & (s_v >= local[:, None])
         )
@@ -323,41 +344,7 @@ class SpeedModel:
         return out, np.where(out, chance, 0.0)
 
 
-_CORNERS = (
-    np.array([[-1, -1], [-1, 1], [1, 1], [1, -1], [0, 0], [-1, 0], [1, 0], [0, -1], [0, 1]], dtype=float) / 2
-)
-"""The points highway-env's ``has_corner_inside`` tests, in (length, width) units: the corners,
-the centre and the edges' middles."""
-
-
-def rectangles_intersect(
-    c1: np.ndarray, a1: np.ndarray, c2: np.ndarray, a2: np.ndarray, length: float, width: float
-) -> np.ndarray:
-    """highway-env's ``utils.rotated_rectangles_intersect`` for pairs of ``length x width``
-    rectangles, vectorised: centres ``(P, 2)`` [m] and angles ``(P,)`` [rad] -> ``(P,)`` bool. As
-    highway-env's, a pair intersects when a corner, edge middle or the centre of one lies in the
-    other, each point turned by the other's angle (its convention, kept as it is)."""
-
-    def inside(ca: np.ndarray, aa: np.ndarray, cb: np.ndarray, ab: np.ndarray) -> np.ndarray:
-        local = _CORNERS * np.array([length, width])  # (9, 2)
-        ca_, sa_ = np.cos(aa)[:, None], np.sin(aa)[:, None]
-        points = ca[:, None, :] + np.stack(
-            [
-                ca_ * local[None, :, 0] - sa_ * local[None, :, 1],
-                sa_ * local[None, :, 0] + ca_ * local[None, :, 1],
-            ],
-            -1,
-        )  # (P, 9, 2)
-        d = points - cb[:, None, :]
-        cb_, sb_ = np.cos(ab)[:, None], np.sin(ab)[:, None]
-        u = cb_ * d[..., 0] - sb_ * d[..., 1]
-        w = sb_ * d[..., 0] + cb_ * d[..., 1]
-        return ((np.abs(u) <= length / 2) & (np.abs(w) <= width / 2)).any(axis=1)
-
-    return inside(c1, a1, c2, a2) | inside(c2, a2, c1, a1)
-
-
-def _stack(samples: list[np.ndarray]) -> np.ndarray:
+def stack_samples(samples: list[np.ndarray]) -> np.ndarray:
     """Route samples of different lengths as one ``(A, K, 3)`` array, each padded by its last row."""
     size = max(len(x) for x in samples)
     return np.stack([np.concatenate([x, np.repeat(x[-1:], size - len(x), axis=0)]) for x in samples])

@@ -1,0 +1,151 @@
+r"""The scene rolled out with the ego going now: whether the ego comes through (the junction
+gate's ``"rollout"`` judge, :class:`~risk_env.highway.gate.JunctionGate`).
+
+The lane predictor's speed model (:mod:`~risk_env.highway.lanes.speed`: highway-env's IDM and its
+intersection's yielding rule, every road user together) moves every route hypothesis of the scene
+with the ego on its planned route (:class:`~risk_env.highway.lanes.hypotheses.EgoPlan`), going
+now at its acceleration up to its speed, never yielding, and braking for its leader as
+highway-env's IDM does (what the MPC does with a car ahead in its lane); the others brake for it
+and yield to it as highway-env's traffic does. Three runs span the IDM's unknown numbers: the
+exponent at the bottom of the interval prediction's range with a desired speed of at least
+:attr:`RolloutModel.target_floor`, the speed model's own numbers, and the exponent at the top
+with the lane's limit as desired speed.
+
+The ego **comes through** when, in every run, its centre gets :attr:`RolloutModel.past` metres
+into the last lane of its plan within :attr:`RolloutModel.horizon`, and until then its body
+(highway-env's car widened by :attr:`RolloutModel.clearance` on each side) meets no route
+hypothesis of weight at least :attr:`RolloutModel.min_weight` (highway-env's rectangle test,
+:func:`~risk_env.highway.lanes.routes.rectangles_intersect`, on the positions between steps).
+Unlike the other judges, which take the ego through the junction at full acceleration whatever
+is in its way, this one lets every road user react to every other: a crossing car that brakes
+for an ego already in its lane, an ego that waits inside the junction for a car crossing ahead
+of it (and is then not through if it waits too long).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from risk_env.highway.lanes.hypotheses import EgoPlan
+from risk_env.highway.lanes.routes import interpolate, rectangles_intersect
+from risk_env.highway.lanes.speed import stack_samples
+
+RUNS = ("slow", "mean", "fast")
+"""The runs, in the order they are tried (module docstring)."""
+
+
+@dataclass(frozen=True)
+class RolloutModel:
+    """The numbers of the rollout (module docstring)."""
+
+    horizon: float = 8.0
+    """How long [s] the scene is rolled out (the ego crosses from a stop in about 5)."""
+    past: float = 5.0
+    """How far [m] into the last lane of its plan the ego's centre must get: a car's length, so
+    that its rear has left the junction."""
+    clearance: float = 0.0
+    """Added [m] to each side of the ego's body and each road user's."""
+    min_weight: float = 0.05
+    """A route hypothesis less likely than this is not a conflict (its road user still takes part)."""
+    target_floor: float = 7.0
+    """The slow run's lowest desired speed [m/s]: highway-env spawns its traffic at 8 m/s with a
+    standard deviation of 1 and keeps that as its desired speed; a measured speed below it says
+    the vehicle brakes, not that it wants to crawl."""
+    samples: int = 8
+    """Positions tested per step."""
+
+    def __post_init__(self) -> None:
+        for name in ("horizon", "past", "clearance", "min_weight", "target_floor"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"RolloutModel.{name} must be a finite number >= 0, got {value!r}")
+        if self.horizon <= 0:
+            raise ValueError(f"RolloutModel.horizon must be > 0 [s], got {self.horizon!r}")
+        if self.min_weight > 1:
+            raise ValueError(f"RolloutModel.min_weight must lie in [0, 1], got {self.min_weight!r}")
+        if isinstance(self.samples, bool) or not isinstance(self.samples, int) or self.samples < 1:
+            raise ValueError(f"RolloutModel.samples must be an integer >= 1, got {self.samples!r}")
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """The rollout's verdict: whether the ego comes through, and if not, why."""
+
+    through: bool
+    reason: str = ""
+    """Empty when through; else the first run that failed and how (the ego short of its exit, or
+    the road user it met, its route and the time)."""
+
+
+def roll_out(
+    predictor: Any,
+    measurements: np.ndarray,
+    plan: EgoPlan,
+    signals: list | None = None,
+    model: RolloutModel | None = None,
+) -> Rollout:
+    """Whether the ego of ``predictor`` (a :class:`~risk_env.highway.lanes.predictor.LanePredictor`
+    with an ``ego``) comes through going now as ``plan`` says, among the road users measured as
+    ``measurements (m, 5)`` with their turn ``signals`` (or None), by the module's rollout."""
+    model = RolloutModel() if model is None else model
+    if getattr(predictor, "ego", None) is None or not hasattr(predictor, "scene"):
+        raise ValueError("the rollout needs a lane predictor with an ego (lane+interval, ego=...)")
+    dt = float(predictor.dt)
+    steps = max(int(math.ceil(model.horizon / dt)), 1)
+    scene = predictor.scene(measurements, steps, signals=signals, ego_plan=plan)
+    egos = np.flatnonzero(scene.is_ego)
+    if len(egos) != 1 or scene.motion is None:
+        return Rollout(False, "the ego is off the road or off its plan")
+    agents, ego = scene.agents, int(egos[0])
+    route = agents.routes[ego]
+    if tuple(plan.lanes[-1]) not in route.lanes:
+        return Rollout(False, "the ego cannot reach the last lane of its plan within the horizon")
+    goal = float(route.offsets[route.lanes.index(tuple(plan.lanes[-1]))]) + model.past
+    count = len(agents.vehicle)
+    low, high = (float(x) for x in predictor.intervals.delta)
+    options = {
+        "slow": {"delta": np.full(count, low), "target": np.maximum(agents.v, model.target_floor)},
+        "mean": {},
+        "fast": {"delta": np.full(count, high), "target": np.full(count, np.inf)},
+    }
+    traffic = predictor.traffic
+    samples = stack_samples([r.samples for r in agents.routes])
+    tau = np.linspace(0.0, steps, steps * model.samples + 1)  # in steps
+    fade = np.exp(-tau * dt / traffic.lateral_time)
+    others = np.flatnonzero(~scene.is_ego & (agents.weight >= model.min_weight))
+    length, width = traffic.vehicle_length + 2 * model.clearance, traffic.vehicle_width + 2 * model.clearance
+    for run in RUNS:
+        s, _ = predictor.speed_model.run(
+            agents,
+            steps,
+            dt,
+            scripted=scene.is_ego,
+            script=scene.motion,
+            exempt=scene.is_ego,
+            script_follows=True,
+            **options[run],
+        )
+        arrived = np.flatnonzero(np.interp(tau, np.arange(steps + 1), s[ego]) >= goal)
+        if not len(arrived):
+            return Rollout(False, f"{run} run: the ego is {goal - s[ego, -1]:.1f} m short of its exit")
+        until = tau[: arrived[0] + 1]
+        along = np.array([np.interp(until, np.arange(steps + 1), row) for row in s])  # (A, T)
+        pose = interpolate(samples, along)  # (A, T, 3)
+        normal = np.stack([-np.sin(pose[..., 2]), np.cos(pose[..., 2])], axis=-1)
+        points = pose[..., :2] + (agents.r[:, None] * fade[None, : len(until)])[..., None] * normal
+        for a in others:
+            near = np.flatnonzero(np.hypot(*(points[a] - points[ego]).T) < length + width)
+            hit = rectangles_intersect(
+                points[a, near], pose[a, near, 2], points[ego, near], pose[ego, near, 2], length, width
+            )
+            if hit.any():
+                when = float(until[near[np.argmax(hit)]]) * dt
+                user = int(agents.vehicle[a])
+                return Rollout(
+                    False, f"{run} run: road user {user} ({agents.routes[a].label()}) at {when:.2f} s"
+                )
+    return Rollout(True)

@@ -1,0 +1,125 @@
+"""The junction gate's ``"rollout"`` judge: the scene rolled out with the ego going now
+(:mod:`risk_env.highway.lanes.rollout`), an ego that brakes for its leader in the speed model, and
+bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("highway_env")
+
+from highway_env.road.road import RoadNetwork  # noqa: E402
+
+from risk_env.highway import LanePredictor, make_intersection_env  # noqa: E402
+from risk_env.highway.gate import GateError, JunctionGate, junction_span  # noqa: E402
+from risk_env.highway.lanes.interval import IntervalModel  # noqa: E402
+from risk_env.highway.lanes.predictor import EgoPlan  # noqa: E402
+from risk_env.highway.lanes.rollout import RolloutModel, roll_out  # noqa: E402
+from risk_env.highway.lanes.routes import Route  # noqa: E402
+from risk_env.highway.lanes.speed import Agents, SpeedModel, TrafficModel  # noqa: E402
+from risk_env.highway.route import RoutePath  # noqa: E402
+from risk_env.prediction.predictors import ConstantPredictor  # noqa: E402
+from risk_env.scenario.scenario import Scenario  # noqa: E402
+
+T = 0.5
+LEFT_TURN = (("o0", "ir0", 0), ("ir0", "il1", 0), ("il1", "o1", 0))
+"""``intersection-v2``'s ego route."""
+
+
+@pytest.fixture(scope="module")
+def network():
+    env = make_intersection_env()
+    env.reset(seed=0)
+    return env.unwrapped.road.network
+
+
+def measurement(network, lane_index, s, speed):
+    lane = network.get_lane(lane_index)
+    x, y = lane.position(s, 0.0)
+    return np.array([x, y, lane.heading_at(s), speed, 0.0])
+
+
+def predictor_at_the_line(network):
+    """The lane+interval predictor with an ego stopped 3 m before its stop line."""
+    ego = measurement(network, LEFT_TURN[0], network.get_lane(LEFT_TURN[0]).length - 3.0, 0.0)
+    intervals = IntervalModel(split_yield=True, centred=True)
+    return LanePredictor(network, T, longitudinal="interval", intervals=intervals, ego=lambda: ego)
+
+
+def test_the_ego_comes_through_an_open_junction_and_not_into_a_crossing_car(network):
+    predictor = predictor_at_the_line(network)
+    plan = EgoPlan(LEFT_TURN, 3.0, 8.0)
+    # a car on the west road, straight on across the ego's turn: far off, it passes after the ego
+    far = measurement(network, ("o1", "ir1", 0), 20.0, 8.0)
+    assert roll_out(predictor, far[None], plan).through
+    leaving = measurement(network, ("il2", "o2", 0), 30.0, 8.0)  # on an exit, driving away
+    assert roll_out(predictor, leaving[None], plan).through
+    # 20 m from its line at 8 m/s it meets the ego in the junction, in some run, whoever brakes
+    near = measurement(network, ("o1", "ir1", 0), 80.0, 8.0)
+    verdict = roll_out(predictor, near[None], plan)
+    assert not verdict.through and "road user 0 (o1>ir1>il3>o3)" in verdict.reason
+    # a conflict with a route less likely than min_weight is none: its signal says it turns off
+    turning = roll_out(predictor, near[None], plan, signals=[np.array([0.0, -1.0])])
+    assert turning.through != verdict.through or "il3" not in turning.reason
+    # a horizon too short for the ego to reach its exit: not through, and said so
+    short = roll_out(predictor, far[None], plan, model=RolloutModel(horizon=2.0))
+    assert not short.through and "cannot reach the last lane of its plan" in short.reason
+    short = roll_out(predictor, far[None], plan, model=RolloutModel(horizon=4.0))
+    assert not short.through and "short of its exit" in short.reason
+
+
+def test_the_gate_with_the_rollout_judge_opens_as_the_rollout_says(network):
+    predictor = predictor_at_the_line(network)
+    path = RoutePath.from_lanes(network, LEFT_TURN)
+    progress = network.get_lane(LEFT_TURN[0]).length - 3.0
+    verdicts = {}
+    for name, s in (("far", 20.0), ("near", 80.0)):
+        gate = JunctionGate(predictor, 4.0, 3.0, 2.5, T, judge="rollout", given_ego=True)
+        gate.route, gate.span, gate.speed_cap = path, junction_span(path), 8.0
+        car = measurement(network, ("o1", "ir1", 0), s, 8.0)
+        decision = gate.decide(progress, 0.0, car[None])
+        assert decision.closed == (not roll_out(predictor, car[None], EgoPlan(LEFT_TURN, 3.0, 8.0)).through)
+        assert decision.slack == (-np.inf if decision.closed else np.inf)
+        verdicts[name] = decision.closed
+    assert verdicts == {"far": False, "near": True}
+    with pytest.raises(GateError, match="rollout judge needs the lane\\+interval predictor"):
+        JunctionGate(ConstantPredictor(Scenario.preset("low")), 4.0, 3.0, 2.5, T, judge="rollout")
+    with pytest.raises(ValueError, match="needs a lane predictor with an ego"):
+        roll_out(LanePredictor(network, T), np.zeros((1, 5)), EgoPlan(LEFT_TURN, 3.0, 8.0))
+
+
+def test_an_ego_that_goes_brakes_for_its_leader_when_told_to():
+    road = RoadNetwork.straight_road_network(lanes=1, length=1000.0, speed_limit=10.0)
+    route = Route(road, (("0", "1", 0),))
+    agents = Agents(
+        np.array([0, 1]),
+        [route, route],
+        np.array([100.0, 130.0]),  # the ego, and a car standing 30 m ahead of it
+        np.zeros(2),
+        np.array([8.0, 0.0]),
+        np.ones(2, dtype=bool),
+    )
+    model = SpeedModel(road, TrafficModel())
+    ego = np.array([True, False])
+    runs = {
+        follows: model.run(agents, 16, T, scripted=ego, script=(3.0, 8.0), script_follows=follows)[0]
+        for follows in (False, True)
+    }
+    assert runs[False][0, -1] > 140.0  # the script alone drives through the car
+    assert np.all(runs[True][0] < runs[True][1] - 5.0)  # braking as the IDM does, it stays behind
+
+
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        ({"horizon": 0.0}, "horizon"),
+        ({"past": -1.0}, "past"),
+        ({"min_weight": 1.5}, "min_weight"),
+        ({"target_floor": float("nan")}, "target_floor"),
+        ({"samples": 0}, "samples"),
+    ],
+)
+def test_bad_rollout_numbers_are_named(bad, match):
+    with pytest.raises(ValueError, match=match):
+        RolloutModel(**bad)
