@@ -64,7 +64,7 @@ JUDGED = {
     "near": "truncation boxes over the MPCs' 3 s horizon and mean car after",
     "stretch": "stretch of its route over the MPCs' 3 s horizon and mean car after",
     "tracks": "tracks along the stretch of its route, each a share of its weight",
-    "rollout": "part in the scene rolled out with the ego going, the gate open if the ego comes through",
+    "rollout": "part in the scene rolled out with the ego going (lanes.rollout)",
 }
 """How the table's header names each judge's view of a mode."""
 
@@ -157,6 +157,17 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
 
     switches = ", ".join(args.interval) or "none"
     closing = "at any conflict" if args.tolerance == 0 else f"above a conflict chance of {args.tolerance:g}"
+    signals = ", turn signals read" if args.signals else ""
+    if args.judge == "rollout":  # no clearance, margin or tolerance: the rollout's own numbers
+        judged_how = (
+            f"the scene rolled out with the ego going, the gate open if the ego comes through{signals}"
+        )
+    else:
+        judged_how = (
+            f"clearance {args.clearance:g} m, margin {args.margin:g} s, others predicted"
+            f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}{signals};"
+            f" each mode judged by its {JUDGED[args.judge]}, the gate closing {closing}"
+        )
     return "\n".join(
         [
             f"`{command}`",
@@ -164,11 +175,7 @@ def markdown(rows: list[dict[str, Any]], args: Any, command: str, wall: float) -
             f"intersection-v2, seeds {args.seed}..{args.seed + args.episodes - 1}, {args.duration:g} s"
             f"{'' if args.lookahead is None else f', going at once judged over {args.lookahead:g} s'};"
             f" the ego waits at the line; predictor {args.predictor} (interval switches: {switches}),"
-            f" clearance {args.clearance:g} m, margin {args.margin:g} s, others predicted"
-            f" {'given that the ego goes' if args.given_ego else 'with the ego braking'}"
-            f"{', turn signals read' if args.signals else ''}; each mode judged by its"
-            f" {JUDGED[args.judge]}, the gate closing"
-            f" {closing}. Going at once: {FUTURE_EGOS[args.future_ego]}."
+            f" {judged_how}. Going at once: {FUTURE_EGOS[args.future_ego]}."
             " Wall time"
             f" {wall:.0f} s. Rates: of the steps judged (free, opened) or of the free steps (opened"
             " where free) or of the through steps (opened where through) [Wilson 95 %].",

@@ -85,6 +85,8 @@ def test_the_gate_with_the_rollout_judge_opens_as_the_rollout_says(network):
     assert verdicts == {"far": False, "near": True}
     with pytest.raises(GateError, match="rollout judge needs the lane\\+interval predictor"):
         JunctionGate(ConstantPredictor(Scenario.preset("low")), 4.0, 3.0, 2.5, T, judge="rollout")
+    with pytest.raises(GateError, match="accepts no chance of a conflict"):
+        JunctionGate(predictor, 4.0, 3.0, 2.5, T, judge="rollout", tolerance=0.1)
     with pytest.raises(ValueError, match="needs a lane predictor with an ego"):
         roll_out(LanePredictor(network, T), np.zeros((1, 5)), EgoPlan(LEFT_TURN, 3.0, 8.0))
 

@@ -69,6 +69,16 @@ def test_bad_input_is_named_before_any_episode(tmp_path, capsys):
     assert "--lookahead" in capsys.readouterr().err
 
 
+def test_the_rollout_judges_header_names_no_clearance_margin_or_tolerance(tmp_path, monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    argv = ["--episodes", "1", "--seed", "5", "--duration", "5", "--workers", "1", "--judge", "rollout"]
+    rows = highway_gate.main([*argv, "--out", str(tmp_path)])
+    assert len(rows) == 2 and all(r["slack_s"] in (float("inf"), -float("inf")) for r in rows)
+    text = (tmp_path / "gate.md").read_text()
+    assert "the scene rolled out with the ego going" in text
+    assert "clearance" not in text and "margin" not in text and "conflict chance" not in text
+
+
 def test_the_header_names_every_judge():
     from benchmarks.highway_gate import JUDGED
     from risk_env.highway.gate_judge import JUDGES

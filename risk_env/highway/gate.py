@@ -197,6 +197,8 @@ class JunctionGate:
             raise GateError(f"tolerance must lie in [0, 1), got {tolerance!r}")
         self.tolerance = float(tolerance)
         """The chance of a conflict the gate accepts (0: none, every counted mode)."""
+        if self.judge == "rollout" and tolerance:
+            raise GateError(f"the rollout judge accepts no chance of a conflict, got tolerance={tolerance!r}")
         self.given_ego = bool(given_ego)
         """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.slow_approach = bool(slow_approach)
