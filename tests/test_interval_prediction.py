@@ -222,3 +222,17 @@ def test_a_fitted_box_holds_its_stretch_of_a_turn_and_keeps_off_the_concentric_l
     # 3 s); the fitted one never comes nearer, and at 3 s stays more than a metre farther off
     assert np.all(np.array(clearance["fitted"]) >= np.array(clearance["symmetric"]) - 1e-9)
     assert clearance["symmetric"][-1] < 1.0 and clearance["fitted"][-1] > clearance["symmetric"][-1] + 1.0
+
+
+def test_every_interval_switch_of_the_benchmarks_is_a_switch_of_the_model():
+    import dataclasses
+
+    from benchmarks.highway_agents import INTERVAL_SWITCHES, interval_model, interval_switches
+
+    fields = {f.name: f for f in dataclasses.fields(IntervalModel)}
+    for name in INTERVAL_SWITCHES:
+        assert fields[name].type in (bool, "bool") and fields[name].default is False
+        on = interval_model((name,))
+        assert getattr(on, name) is True
+        assert all(getattr(on, other) == fields[other].default for other in fields if other != name)
+    assert interval_switches("ego_ahead,upper_yields") == ("ego_ahead", "upper_yields")
