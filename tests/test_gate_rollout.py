@@ -69,6 +69,18 @@ def test_the_ego_comes_through_an_open_junction_and_not_into_a_crossing_car(netw
     assert not short.through and "short of its exit" in short.reason
 
 
+def test_a_road_user_off_the_road_keeps_its_speed_and_heading(network):
+    """A car standing 5 m beside the ego's exit lane, off the road: it takes no part in the runs,
+    but stands where it is; with bodies 2 m wider on each side the ego, passing, meets it."""
+    predictor = predictor_at_the_line(network)
+    plan = EgoPlan(LEFT_TURN, 3.0, 8.0)
+    car = np.array([-20.0, -7.0, np.pi, 0.0, 0.0])
+    assert predictor.scene(car[None], 16).hypotheses[0] is None  # off the road
+    assert roll_out(predictor, car[None], plan, model=RolloutModel(past=15.0)).through
+    wide = roll_out(predictor, car[None], plan, model=RolloutModel(past=15.0, clearance=2.0))
+    assert not wide.through and "road user 0 (off the road)" in wide.reason
+
+
 def test_the_gate_with_the_rollout_judge_opens_as_the_rollout_says(network):
     predictor = predictor_at_the_line(network)
     path = RoutePath.from_lanes(network, LEFT_TURN)

@@ -15,7 +15,9 @@ The ego **comes through** when, in every run, its centre gets :attr:`RolloutMode
 into the last lane of its plan within :attr:`RolloutModel.horizon`, and until then its body
 (highway-env's car widened by :attr:`RolloutModel.clearance` on each side) meets no route
 hypothesis of weight at least :attr:`RolloutModel.min_weight` (highway-env's rectangle test,
-:func:`~risk_env.highway.lanes.routes.rectangles_intersect`, on the positions between steps).
+:func:`~risk_env.highway.lanes.routes.rectangles_intersect`, on the positions between steps), nor
+a road user off the road (taking no part in the runs, it drives on at its speed and heading, as
+the paper's constant predictor has it).
 Unlike the other judges, which take the ego through the junction at full acceleration whatever
 is in its way, this one lets every road user react to every other: a crossing car that brakes
 for an ego already in its lane, an ego that waits inside the junction for a car crossing ahead
@@ -117,6 +119,7 @@ def roll_out(
     tau = np.linspace(0.0, steps, steps * model.samples + 1)  # in steps
     fade = np.exp(-tau * dt / traffic.lateral_time)
     others = np.flatnonzero(~scene.is_ego & (agents.weight >= model.min_weight))
+    stray = [i for i, hyp in enumerate(scene.hypotheses[: scene.users]) if hyp is None]
     length, width = traffic.vehicle_length + 2 * model.clearance, traffic.vehicle_width + 2 * model.clearance
     for run in RUNS:
         s, _ = predictor.speed_model.run(
@@ -137,15 +140,20 @@ def roll_out(
         pose = interpolate(samples, along)  # (A, T, 3)
         normal = np.stack([-np.sin(pose[..., 2]), np.cos(pose[..., 2])], axis=-1)
         points = pose[..., :2] + (agents.r[:, None] * fade[None, : len(until)])[..., None] * normal
-        for a in others:
-            near = np.flatnonzero(np.hypot(*(points[a] - points[ego]).T) < length + width)
+        tracks = [
+            (points[a], pose[a, :, 2], f"road user {agents.vehicle[a]} ({agents.routes[a].label()})")
+            for a in others
+        ]
+        for user in stray:  # off the road: at its speed and heading, as the paper's constant predictor
+            x, y, theta, v = scene.rows[user, :4]
+            t = until * dt
+            track = np.column_stack([x + v * t * math.cos(theta), y + v * t * math.sin(theta)])
+            tracks.append((track, np.full(len(t), theta), f"road user {user} (off the road)"))
+        for track, heading, name in tracks:
+            near = np.flatnonzero(np.hypot(*(track - points[ego]).T) < length + width)
             hit = rectangles_intersect(
-                points[a, near], pose[a, near, 2], points[ego, near], pose[ego, near, 2], length, width
+                track[near], heading[near], points[ego, near], pose[ego, near, 2], length, width
             )
             if hit.any():
-                when = float(until[near[np.argmax(hit)]]) * dt
-                user = int(agents.vehicle[a])
-                return Rollout(
-                    False, f"{run} run: road user {user} ({agents.routes[a].label()}) at {when:.2f} s"
-                )
+                return Rollout(False, f"{run} run: {name} at {float(until[near[np.argmax(hit)]]) * dt:.2f} s")
     return Rollout(True)
