@@ -91,16 +91,18 @@ def configuration(options: dict[str, Any], exclude: Iterable[str] = ()) -> dict[
     return jsonable({k: v for k, v in sorted(options.items()) if k not in skip})
 
 
-def git_commit() -> str | None:
-    """The commit of the checkout the benchmarks run from (``+dirty`` with changes), or None."""
+def git_commit(output: Path | None = None) -> str | None:
+    """The commit of the checkout the benchmarks run from (``+dirty`` with changes other than in
+    ``output``, the run's own folder, whose files it has just replaced), or None."""
     try:
         head = subprocess.run(
             ["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
         )
         if head.returncode != 0:
             return None
+        own = [] if output is None else [f":(exclude){Path(output).resolve()}"]
         dirty = subprocess.run(
-            ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
+            ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no", "--", str(ROOT), *own],
             capture_output=True,
             text=True,
             timeout=10,
@@ -361,7 +363,7 @@ class OutputSet:
             "options": jsonable(self.options),
             "configuration": self.config,
             "version": package_version(),
-            "git_commit": git_commit(),
+            "git_commit": git_commit(self.out),
             "started": self.started,
             "finished": _now(),
             "files": {name: _digest(self.out / name) for name in new},

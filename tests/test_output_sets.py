@@ -219,3 +219,30 @@ def test_train_ppo_seeds_resume_to_the_uninterrupted_results(tmp_path, monkeypat
     clean = json.loads((tmp_path / "clean" / "tiny_seeds.json").read_text())
     resumed = json.loads((out / "tiny_seeds.json").read_text())
     assert resumed["best"] == clean["best"] and resumed["results"] == clean["results"]
+
+
+def test_the_manifests_commit_is_dirty_for_changed_code_not_for_the_runs_own_files(tmp_path, monkeypatch):
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None:
+        pytest.skip("git is not installed")
+    repo = tmp_path / "repo"
+    (repo / "results" / "set").mkdir(parents=True)
+    (repo / "code.py").write_text("x = 1\n")
+    (repo / "results" / "set" / "table.csv").write_text("a\n1\n")
+
+    def git(*args: str) -> None:
+        subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True)
+
+    git("init", "-q")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "start")
+    monkeypatch.setattr(output, "ROOT", repo)
+    clean = output.git_commit()
+    assert clean and not clean.endswith("+dirty")
+    (repo / "results" / "set" / "table.csv").write_text("a\n2\n")  # a run replaced its own table
+    assert output.git_commit() == clean + "+dirty"
+    assert output.git_commit(repo / "results" / "set") == clean
+    (repo / "code.py").write_text("x = 2\n")  # the code changed: dirty whatever the output
+    assert output.git_commit(repo / "results" / "set") == clean + "+dirty"
