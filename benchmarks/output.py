@@ -94,19 +94,15 @@ def configuration(options: dict[str, Any], exclude: Iterable[str] = ()) -> dict[
 def git_commit(output: Path | None = None) -> str | None:
     """The commit of the checkout the benchmarks run from (``+dirty`` with changes other than in
     ``output``, the run's own folder, whose files it has just replaced), or None."""
+    own = [] if output is None else [f":(exclude){Path(output).resolve()}"]
+    calls = (["rev-parse", "HEAD"], ["status", "--porcelain", "--untracked-files=no", "--", str(ROOT), *own])
     try:
-        head = subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
+        head, dirty = (
+            subprocess.run(["git", "-C", str(ROOT), *c], capture_output=True, text=True, timeout=10)
+            for c in calls
         )
         if head.returncode != 0:
             return None
-        own = [] if output is None else [f":(exclude){Path(output).resolve()}"]
-        dirty = subprocess.run(
-            ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no", "--", str(ROOT), *own],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
         return head.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
     except (OSError, subprocess.SubprocessError):
         return None
