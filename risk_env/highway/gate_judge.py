@@ -25,7 +25,6 @@ r"""How the junction gate judges a vehicle's prediction (:class:`~risk_env.highw
   going at once came through were of lanes 4 to 9 m from the ego's path, and at a quarter of those
   steps they alone closed it). A mode without one (the paper's predictor, the gate's virtual
   object) is judged by its box up to the step before, by its mean car from that step.
-
 - ``"rollout"``: no mode is judged; the whole scene is rolled out with the ego going now, every
   road user reacting to every other, and the gate opens when the ego comes through
   (:mod:`~risk_env.highway.lanes.rollout`; the lane+interval predictor with an ego only; the gate's

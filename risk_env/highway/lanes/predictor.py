@@ -211,13 +211,7 @@ class LanePredictor(Predictor):
         route, never yielding, the others reacting to it as highway-env's traffic does) instead of
         braking."""
         scene = self.scene(measurements, steps, lanes, signals, ego_plan)
-        rows, hypotheses, agents, is_ego, motion = (
-            scene.rows,
-            scene.hypotheses,
-            scene.agents,
-            scene.is_ego,
-            scene.motion,
-        )
+        agents, is_ego, motion = scene.agents, scene.is_ego, scene.motion
         s, v = (
             self.speed_model.run(
                 agents,
@@ -246,7 +240,7 @@ class LanePredictor(Predictor):
         out: list[Mixture] = []
         first = 0
         self.predicted += scene.users
-        for row, hyp in zip(rows[: scene.users], hypotheses[: scene.users], strict=True):
+        for row, hyp in zip(scene.rows[: scene.users], scene.hypotheses[: scene.users], strict=True):
             if hyp is None:
                 self.fallbacks += 1
                 out.append(self.fallback.predict(row, steps))

@@ -117,6 +117,8 @@ def roll_out(
     traffic = predictor.traffic
     samples = stack_samples([r.samples for r in agents.routes])
     tau = np.linspace(0.0, steps, steps * model.samples + 1)  # in steps
+    low = np.minimum(np.floor(tau).astype(int), steps - 1)
+    frac = (tau - low)[None, :]
     fade = np.exp(-tau * dt / traffic.lateral_time)
     others = np.flatnonzero(~scene.is_ego & (agents.weight >= model.min_weight))
     stray = [i for i, hyp in enumerate(scene.hypotheses[: scene.users]) if hyp is None]
@@ -132,12 +134,12 @@ def roll_out(
             script_follows=True,
             **options[run],
         )
-        arrived = np.flatnonzero(np.interp(tau, np.arange(steps + 1), s[ego]) >= goal)
+        along = s[:, low] * (1.0 - frac) + s[:, low + 1] * frac  # (A, T): linear between steps
+        arrived = np.flatnonzero(along[ego] >= goal)
         if not len(arrived):
             return Rollout(False, f"{run} run: the ego is {goal - s[ego, -1]:.1f} m short of its exit")
         until = tau[: arrived[0] + 1]
-        along = np.array([np.interp(until, np.arange(steps + 1), row) for row in s])  # (A, T)
-        pose = interpolate(samples, along)  # (A, T, 3)
+        pose = interpolate(samples, along[:, : len(until)])  # (A, T, 3)
         normal = np.stack([-np.sin(pose[..., 2]), np.cos(pose[..., 2])], axis=-1)
         points = pose[..., :2] + (agents.r[:, None] * fade[None, : len(until)])[..., None] * normal
         tracks = [
