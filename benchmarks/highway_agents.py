@@ -181,19 +181,26 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
         corridor=getattr(args, "corridor", ADAPTER_CORRIDOR),
         gate=gate_settings(args),
         **body_overrides(args),
-        **ego_overrides(args),
+        **ego_overrides(args, env),
     )
 
 
-def ego_overrides(args: argparse.Namespace) -> dict[str, Any]:
+def ego_overrides(args: argparse.Namespace, env: Any = None) -> dict[str, Any]:
     """The adapter's scenario overrides for the ego from ``--v-ref`` and ``--ego-accel`` (the lanes'
-    $v_{max}$ rises to a higher $v_{ref}$)."""
+    $v_{max}$ rises to a higher $v_{ref}$) and, with ``--car-turning``, the curvature
+    limit of ``env``'s car (:func:`risk_env.highway.common.bicycle_curvature`)."""
     from risk_env.highway.adapter import ADAPTER_DEFAULTS
 
     v_ref = getattr(args, "v_ref", ADAPTER_DEFAULTS["v_ref"])
     overrides = {"v_ref": v_ref, "v_max": max(ADAPTER_DEFAULTS["v_max"], v_ref)}
     accel = getattr(args, "ego_accel", None)  # None: the scenario's
-    return overrides if accel is None else overrides | {"accel_max": accel}
+    if accel is not None:
+        overrides["accel_max"] = accel
+    if getattr(args, "car_turning", False):
+        from risk_env.highway.common import bicycle_curvature, unwrapped_highway
+
+        overrides["curvature_max"] = bicycle_curvature(unwrapped_highway(env))
+    return overrides
 
 
 def body_overrides(args: argparse.Namespace) -> dict[str, Any]:

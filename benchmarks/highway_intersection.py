@@ -167,6 +167,12 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         help="the ego's largest acceleration and braking in the MPCs and the gate [m/s^2]",
     )
     parser.add_argument(
+        "--car-turning",
+        action="store_true",
+        help="the MPCs turn only while they move, within highway-env's car's turning circle at full"
+        " lock: |omega| <= kappa v (Ego.curvature_max); off: the paper's unicycle, which turns standing",
+    )
+    parser.add_argument(
         "--car-discs",
         type=cli.positive_int,
         default=1,

@@ -234,11 +234,13 @@ def gate_text(args: Any) -> str:
 
 
 def radius_text(args: Any) -> str:
-    """The MPCs' object disc radius where the options change it (for the table's header), else ""."""
+    """The MPCs' object disc radius and turning where the options change them (for the table's header),
+    else ""."""
     from benchmarks.highway_agents import ADAPTER_OBJECT_RADIUS
 
     radius = getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS)
     discs = getattr(args, "car_discs", 1)
+    turning = ", the MPCs turning as the car does" if getattr(args, "car_turning", False) else ""
     if discs > 1:
-        return f", the MPCs' cars {discs} discs each"
-    return "" if radius == ADAPTER_OBJECT_RADIUS else f", the MPCs' object discs {radius:g} m"
+        return f", the MPCs' cars {discs} discs each{turning}"
+    return turning if radius == ADAPTER_OBJECT_RADIUS else f", the MPCs' object discs {radius:g} m{turning}"

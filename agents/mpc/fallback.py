@@ -27,10 +27,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
 from agents.mpc.guesses import pursuit, ramp
+from risk_env.models.dynamics import turn_limit
 from risk_env.models.path import lateral_offset
 from risk_env.scenario.scenario import Scenario
 
@@ -53,6 +55,7 @@ def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) ->
     dv, dw = ego.accel_max * dt * shrink, ego.omega_rate_max * dt * shrink
     v = np.clip(np.clip(action[0], last[0] - dv, last[0] + dv), ego.v_min, ego.v_max)
     w = np.clip(np.clip(action[1], last[1] - dw, last[1] + dw), -ego.omega_max, ego.omega_max)
+    w = turning(ego, w, v * shrink)
     return np.array([v, w], dtype=float)
 
 
@@ -70,12 +73,18 @@ def manoeuvres(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
         v = ramp(v_last, speed[s], ego.accel_max * dt, v_lim, N)
         for t in TURNS:
             omega = ramp(w_last, turn[t], ego.omega_rate_max * dt, w_lim, N)
-            out[f"{s}_{t}" if t else s] = np.column_stack([v, omega, v])
+            out[f"{s}_{t}" if t else s] = np.column_stack([v, turning(ego, omega, v), v])
     if math.isfinite(scenario.path.corridor):
         for s in SPEEDS:
             v = ramp(v_last, speed[s], ego.accel_max * dt, v_lim, N)
-            out[f"{s}_{FOLLOW}"] = np.column_stack([v, pursuit(scenario, x0, v), v])
+            out[f"{s}_{FOLLOW}"] = np.column_stack([v, turning(ego, pursuit(scenario, x0, v), v), v])
     return out
+
+
+def turning(ego: Any, omega: np.ndarray, v: np.ndarray) -> np.ndarray:
+    r"""Turn rates ``omega`` [rad/s] a car can make at the speeds ``v`` [m/s]
+    (:func:`risk_env.models.dynamics.turn_limit` with ``ego.curvature_max``)."""
+    return turn_limit(ego.curvature_max, omega, v)
 
 
 def safest(risk: np.ndarray, clearance: np.ndarray, epsilon: float, outside: np.ndarray | None = None) -> int:

@@ -294,8 +294,8 @@ class Step:
     def corridor_bounds(self, pr: Problem) -> tuple[np.ndarray, np.ndarray]:
         """The corridor rows' ``(lower, upper)`` bounds: :func:`agents.mpc.nlp.corridor.step_widths`
         (an ego outside the corridor gets :data:`CORRIDOR_REENTRY` more)."""
-        x, y = self.x0[0], self.x0[1]
-        width = step_widths(self.context.scenario, x, y, pr.soft, pr.variant == "free", CORRIDOR_REENTRY)
+        x, y, theta, free = self.x0[0], self.x0[1], self.x0[2], pr.variant == "free"
+        width = step_widths(self.context.scenario, x, y, pr.soft, free, CORRIDOR_REENTRY, theta)
         rows = pr.corridor_rows
         return step_bounds(pr.lbg[rows], pr.ubg[rows], width[[pr.g_tags[i][0] - 1 for i in rows]])
 

@@ -12,7 +12,7 @@ from gymnasium import spaces
 
 from risk_env import checks, observation
 from risk_env.envs import arguments
-from risk_env.envs.transition import advance_one, view
+from risk_env.envs.transition import advance_one, applied_action, view
 from risk_env.envs.variations import Variations, vary
 from risk_env.prediction.predictors import Predictor
 from risk_env.render.renderers import RENDERERS
@@ -314,7 +314,7 @@ class RiskCrossingEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._ended is not None:
             raise gym.error.ResetNeeded(f"the episode has ended ({self._ended}); call env.reset() to step on")
         s = self.scenario
-        v, omega = checks.ego_action(action, s.ego)
+        v, omega = applied_action(action, s.ego)
         # 1.-3. the ego moves (dynamics.step's unicycle); each object moves from its one-step
         # belief B_i, made from its measurement before the move; the risk terms R_i of the ego's
         # new state against each B_i. Python floats throughout: numpy's per-call cost would dominate.

@@ -16,8 +16,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from risk_env import observation
-from risk_env.models.dynamics import unicycle_step
+from risk_env import checks, observation
+from risk_env.models.dynamics import turn_limit, unicycle_step
 from risk_env.models.ops import MATH, NUMPY, Ops
 from risk_env.models.path import AnyPath, path_error, project
 from risk_env.prediction.belief import Belief, predict_step
@@ -295,3 +295,11 @@ def view(
         "is_success": goal and not collision,
     }
     return seen.obs, info, goal
+
+
+def applied_action(action: Any, ego: Any) -> tuple[float, float]:
+    """The single env's ``action`` checked (:func:`risk_env.checks.ego_action`) as the ``(v [m/s],
+    omega [rad/s])`` the ego applies: ``omega`` within ``ego``'s curvature limit
+    (:func:`risk_env.models.dynamics.turn_limit`; a car turns only while it moves)."""
+    v, omega = checks.ego_action(action, ego)
+    return v, float(turn_limit(ego.curvature_max, omega, v))

@@ -170,6 +170,7 @@ class RiskCrossingVectorEnv(VectorEnv):
             self._reset_copies(self._autoreset)  # next-step autoreset: these copies only reset
             active = ~self._autoreset
         checks.batch_actions_inside(a, self._action_low, self._action_high, self.base_scenario.ego, active)
+        a[:, 1] = dynamics.turn_limit(s.ego.curvature_max, a[:, 1], a[:, 0])  # turns only while moving
         if active is not None:  # the reset copies are computed too, on a harmless input, and kept
             a[~active] = 0.0
         if n <= self.scalar_copies:
@@ -395,6 +396,5 @@ class RiskCrossingVectorEnv(VectorEnv):
 
 
 SCALAR_COPIES = 7
-"""Up to this many copies, a batch step runs each copy through the single env's float code (~25 us
-a copy): numpy's fixed cost (some 250 calls of ~0.7 us on tiny arrays) exceeds a few copies' cost.
-Measured crossover: about 8 copies."""
+"""Up to this many copies, a batch step runs each copy through the single env's float code (~25 us a
+copy): numpy's fixed cost (~250 calls of ~0.7 us) exceeds a few copies' cost (measured crossover: ~8)."""

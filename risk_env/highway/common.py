@@ -69,6 +69,15 @@ def slip_angle(steering: float) -> float:
     return math.atan(0.5 * math.tan(steering))
 
 
+def bicycle_curvature(base: Any) -> float:
+    r"""The largest curvature [1/m] of the course of the unwrapped env ``base``'s controlled car at
+    full lock: $\sin\beta_{max} / (l / 2)$, $\beta_{max}$ the slip angle (:func:`slip_angle`) of its
+    action's largest steering angle and $l$ its length (the kinematic bicycle turns at
+    $\omega = v \sin\beta / (l / 2)$)."""
+    steering = max(abs(float(a)) for a in base.action_type.steering_range)
+    return math.sin(slip_angle(steering)) / (0.5 * float(base.action_type.vehicle_class.LENGTH))
+
+
 def vehicle_measurement(vehicle: Any) -> np.ndarray:
     r"""A highway-env vehicle as our unicycle measurement $(c_1, c_2, \theta, v, \omega)$ [m, m, rad,
     m/s, rad/s], ``(5,)`` float64.

@@ -46,3 +46,13 @@ def rollout(state: np.ndarray, action: np.ndarray, dt: float, steps: int) -> np.
 def casadi_step(state: ca.SX | ca.MX, action: ca.SX | ca.MX, dt: float) -> ca.SX | ca.MX:
     """CasADi face: ``state (3,)`` and ``action (2,)`` column vectors -> next state ``(3,)``."""
     return ca.vertcat(*unicycle_step(state[0], state[1], state[2], action[0], action[1], dt, CASADI))
+
+
+def turn_limit(curvature_max: float, omega: Any, v: Any) -> Any:
+    r"""Turn rates ``omega`` [rad/s] within $|\omega| \le \kappa_{max} \max(v, 0)$ at the speeds ``v``
+    [m/s], $\kappa_{max}$ = ``curvature_max`` [1/m] (:attr:`risk_env.scenario.parts.Ego.curvature_max`):
+    a car turns only while it moves. Unchanged when $\kappa_{max}$ is infinite (the paper's unicycle)."""
+    if not np.isfinite(curvature_max):
+        return omega
+    bound = curvature_max * np.maximum(v, 0.0)
+    return np.clip(omega, -bound, bound)

@@ -77,6 +77,9 @@ class Ego:
     """Largest speed change per second [m/s^2] (a rate limit on $v$)."""
     omega_rate_max: float = 1.6
     r"""Largest turn-rate change per second [rad/s^2] (a rate limit on $\omega$)."""
+    curvature_max: float = math.inf
+    r"""Largest curvature of its course $\kappa_{max}$ [1/m]: $|\omega| \le \kappa_{max} v$, so that it
+    turns only while it moves, as a car does (inf: the paper's unicycle, which turns standing)."""
     discs: int = 1
     """Collision discs of radius ``radius`` along the heading (1: the paper's single disc)."""
     length: float = 0.0
@@ -102,6 +105,15 @@ class Ego:
         checks.positive("ego.omega_max", self.omega_max)
         checks.positive("ego.accel_max", self.accel_max)
         checks.positive("ego.omega_rate_max", self.omega_rate_max)
+        kappa = checks.real("ego.curvature_max", self.curvature_max)
+        if not kappa > 0:  # NaN too
+            raise ValueError(f"ego.curvature_max must be > 0 [1/m] (inf: none), got {self.curvature_max!r}")
+        object.__setattr__(self, "curvature_max", kappa)
+        if math.isfinite(self.curvature_max) and self.v_min < 0:
+            raise ValueError(
+                f"ego.curvature_max ({self.curvature_max}) needs ego.v_min >= 0, got {self.v_min}: a"
+                " reversing ego's |omega| <= kappa |v| is not a pair of linear rows"
+            )
         check_body(self, "ego")
         v0, w0 = self.initial_input
         if not (self.v_min <= v0 <= self.v_max and abs(w0) <= self.omega_max):

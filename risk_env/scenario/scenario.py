@@ -305,6 +305,7 @@ OVERRIDES: Mapping[str, tuple[str | None, str]] = {
     "omega_max": ("ego", "omega_max"),
     "accel_max": ("ego", "accel_max"),
     "omega_rate_max": ("ego", "omega_rate_max"),
+    "curvature_max": ("ego", "curvature_max"),
     "ego_discs": ("ego", "discs"),
     "ego_length": ("ego", "length"),
     "objects": (None, "objects"),

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from risk_env.models.path import lateral_offset
+from risk_env.models.path import lateral_offset, point, project
 
 CORRIDOR_WEIGHT = 1.0
 r"""A corridor slack of 1 m at any stage costs this many times $\rho\, q^N$ (:func:`corridor_weight`)."""
@@ -65,21 +65,45 @@ def step_bounds(
     return lower, upper
 
 
-def step_widths(scenario: Any, x: float, y: float, soft: bool, free: bool, reentry: float) -> np.ndarray:
-    r"""The corridor's half widths [m] at $n = 1, \dots, N$ for an ego at ``(x, y)`` [m]: the path's;
-    for an ego that starts outside it, in a hard variant, its offset plus ``reentry`` (so that the
-    start alone never makes the problem infeasible), narrowing to the path's at $n = N$ where there
-    are risk rows (a constant widening let each plan edge further out: at the intersection the lanes'
-    boxes pushed the ego off the road half a metre a step), constant in the ``free`` problem (which
-    has no soft variant). A ``soft`` variant keeps the path's: its slacks pay for the start."""
+def step_widths(
+    scenario: Any, x: float, y: float, soft: bool, free: bool, reentry: float, theta: float = 0.0
+) -> np.ndarray:
+    r"""The corridor's half widths [m] at $n = 1, \dots, N$ for an ego at ``(x, y)`` [m] heading
+    ``theta`` [rad]: the path's; for an ego that starts outside it, in a hard variant, its offset plus
+    ``reentry`` (so that the start alone never makes the problem infeasible), narrowing to the path's
+    at $n = N$ where there are risk rows (a constant widening let each plan edge further out: at the
+    intersection the lanes' boxes pushed the ego off the road half a metre a step), constant in the
+    ``free`` problem (which has no soft variant). A ``soft`` variant keeps the path's: its slacks pay
+    for the start. An ego with a curvature limit (:attr:`~risk_env.scenario.parts.Ego.curvature_max`)
+    heading outwards first drifts out by :func:`turn_back` before it can turn back: that counts as
+    part of its offset, in the soft variants too (no slack can pay for what no plan avoids), and the
+    corridor narrows to its offset now, not to the path's: back, never further out."""
     path, N = scenario.path, scenario.horizon
-    offset = abs(float(lateral_offset(path, x, y)))
-    if offset <= path.corridor or soft:
+    signed = float(lateral_offset(path, x, y))
+    drift = turn_back(scenario, signed, x, y, theta)
+    offset = abs(signed) + drift
+    if offset <= path.corridor or (soft and drift == 0.0):
         return np.full(N, path.corridor)
     wide = offset + reentry
     if free:
         return np.full(N, wide)
-    return path.corridor + (wide - path.corridor) * (1.0 - np.arange(1, N + 1) / N)
+    floor = max(path.corridor, abs(signed)) if drift > 0.0 else path.corridor  # never further out
+    return floor + (wide - floor) * (1.0 - np.arange(1, N + 1) / N)
+
+
+def turn_back(scenario: Any, offset: float, x: float, y: float, theta: float) -> float:
+    r"""How far [m] further out an ego at ``(x, y)`` [m] with lateral ``offset`` [m] drifts while it
+    turns parallel to the path from heading ``theta`` [rad] at its tightest, $R (1 - \cos \Delta)$ with
+    $R = 1 / \kappa_{max}$ and $\Delta$ its heading's angle away from the path, when it heads outwards;
+    0 when it heads inwards or turns standing (no curvature limit)."""
+    kappa = scenario.ego.curvature_max
+    if not math.isfinite(kappa):
+        return 0.0
+    _, _, heading = point(scenario.path, project(scenario.path, x, y))
+    delta = math.remainder(theta - float(heading), 2.0 * math.pi)
+    if offset * math.sin(delta) <= 0.0:  # inwards, or along the path
+        return 0.0
+    return (1.0 - math.cos(min(abs(delta), math.pi / 2))) / kappa
 
 
 def fill_slacks(problem: Any, w: np.ndarray, g: np.ndarray, lbg: np.ndarray, push: float) -> np.ndarray:

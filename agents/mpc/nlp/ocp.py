@@ -22,8 +22,10 @@ The sections of :func:`assemble`, in order:
 - **Constraints**: $v \in [v_{min}, v_{max}]$, $|\omega| \le \omega_{max}$; rate limits
   $|v_n - v_{n-1}| \le a_{max} T$, $|\omega_n - \omega_{n-1}| \le \dot\omega_{max} T$ ($a_{max}$ =
   ``accel_max``, $\dot\omega_{max}$ = ``omega_rate_max``) with $(v, \omega)_{-1}$ the last applied
-  input; $u_2 \in [v_{min}, v_{max}]$ (the paper's $u_2 \in \mathcal{V}_e$, the
-  ego's own speed set, so the reference point may wait or step back with a reversing ego);
+  input; with a finite ``curvature_max`` $\kappa_{max}$, $|\omega_n| \le \kappa_{max} v_n$ (a car turns
+  only while it moves; none for the paper's unicycle); $u_2 \in [v_{min}, v_{max}]$ (the paper's
+  $u_2 \in \mathcal{V}_e$, the ego's own speed set, so the reference point may wait or step back with
+  a reversing ego);
   $\lambda_n \ge \lambda_0$ (the path's start) and no upper cap (the path continues beyond the goal);
   the agent's risk constraint $\mathrm{margin}_n \ge \mathrm{backoff}$ for $n = 1, \dots, N$ at the
   ego's predicted state $n$ with speed $v_{n-1}$ (the input that led there: the env's $R_{k+1|k}$),
@@ -357,6 +359,9 @@ def assemble(
         add_accumulator(n)
         add_g(U[n][0] - X[n][4], -dv, dv, n, "rate_v")
         add_g(U[n][1] - X[n][5], -dw, dw, n, "rate_omega")
+        if math.isfinite(ego.curvature_max):  # |omega| <= kappa v: it turns only while it moves
+            kappa_v = ego.curvature_max * U[n][0]
+            add_g(ca.vertcat(kappa_v - U[n][1], kappa_v + U[n][1]), 0.0, math.inf, n, "curvature")
         if n >= 1:
             cost += add_risk(n) + add_corridor(n)
         cost += w_v * (U[n][2] - p_vref) ** 2
