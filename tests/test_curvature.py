@@ -144,8 +144,8 @@ def test_an_ego_heading_out_of_its_corridor_gets_room_to_turn_back():
     assert turn_back(base, 0.9, px, py, theta - 0.5) == 0.0  # inwards
     assert turn_back(base.replace(v_min=-4.0, curvature_max=math.inf), 0.9, px, py, out) == 0.0
     N = base.horizon
-    for soft in (False, True):
-        width = step_widths(base, px, py, soft, False, 0.5, out)
+    for soft, free in ((False, False), (True, False), (False, True)):
+        width = step_widths(base, px, py, soft, free, 0.5, out)
         assert width[0] >= 0.9 + drift and width[-1] == pytest.approx(1.0)
         assert np.all(np.diff(width) <= 0.0) and len(width) == N
     assert np.all(step_widths(base, px, py, False, False, 0.5, theta - 0.5) == 1.0)

@@ -77,7 +77,8 @@ def step_widths(
     for the start. An ego with a curvature limit (:attr:`~risk_env.scenario.parts.Ego.curvature_max`)
     heading outwards first drifts out by :func:`turn_back` before it can turn back: that counts as
     part of its offset, in the soft variants too (no slack can pay for what no plan avoids), and the
-    corridor narrows to its offset now, not to the path's: back, never further out."""
+    corridor narrows to its offset now, not to the path's: back, never further out (in the ``free``
+    problem too, whose constant widening let the ego edge out at every step)."""
     path, N = scenario.path, scenario.horizon
     signed = float(lateral_offset(path, x, y))
     drift = turn_back(scenario, signed, x, y, theta)
@@ -85,7 +86,7 @@ def step_widths(
     if offset <= path.corridor or (soft and drift == 0.0):
         return np.full(N, path.corridor)
     wide = offset + reentry
-    if free:
+    if free and drift == 0.0:
         return np.full(N, wide)
     floor = max(path.corridor, abs(signed)) if drift > 0.0 else path.corridor  # never further out
     return floor + (wide - floor) * (1.0 - np.arange(1, N + 1) / N)
