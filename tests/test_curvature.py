@@ -41,8 +41,8 @@ def planned(scenario: Scenario) -> tuple[np.ndarray, RMPC]:
 def test_the_plan_turns_only_while_it_moves_and_the_paper_has_no_such_rows():
     r"""From a standstill askew, the unicycle turns at once, faster than a car can at that speed;
     with the limit every planned input keeps $|\omega_n| \le \kappa v_n$."""
-    free, paper = planned(standing_askew(math.inf))
-    assert np.any(np.abs(free[:, 1]) > KAPPA * free[:, 0] + 1e-2)  # the limit binds here
+    unlimited, paper = planned(standing_askew(math.inf))
+    assert np.any(np.abs(unlimited[:, 1]) > KAPPA * unlimited[:, 0] + 1e-2)  # the limit binds here
     assert not any(tag[1] == "curvature" for tag in paper._problem(paper.last_solve.variant).g_tags)
     inputs, agent = planned(standing_askew(KAPPA))
     assert agent.last_solve.fallback is None
@@ -80,7 +80,8 @@ def test_the_env_turns_the_car_only_while_it_moves():
         heading = env.unwrapped._ego_pose[2]
         env.step(np.array([0.0, 0.5], dtype=np.float32))
         assert env.unwrapped._ego_pose[2] - heading == pytest.approx(turned, abs=1e-6)
-    batched = gym.make_vec("RiskCrossing-v0", num_envs=9, scenario=standing_askew(KAPPA)).unwrapped
+    scenario = standing_askew(KAPPA)
+    batched = gym.make_vec("RiskCrossing-v0", num_envs=9, scenario=scenario).unwrapped
     batched.reset(seed=0)
     before = batched._state[2].copy()
     batched.step(np.tile([2.0, 0.8], (9, 1)).astype(np.float32))  # at 2 m/s the limit is 0.4 rad/s
@@ -130,7 +131,7 @@ def test_a_curvature_limit_refuses_a_reversing_ego():
 
 def test_an_ego_heading_out_of_its_corridor_gets_room_to_turn_back():
     r"""Near the corridor's edge heading 30 degrees outwards, a car drifts $R (1 - \cos 30^\circ)$ further
-    out before it is parallel again: the step's corridor (hard and soft) leaves it that much room, and
+    out before it is parallel again: the step's corridor (hard, soft, free) leaves it that much room, and
     narrows to where it is now, never further out; heading inwards, or turning standing, it does not."""
     base = standing_askew(KAPPA).replace(corridor=1.0)
     path = base.path
