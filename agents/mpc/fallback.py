@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import numpy as np
 
@@ -55,7 +54,7 @@ def feasible_action(scenario: Scenario, action: np.ndarray, last: np.ndarray) ->
     dv, dw = ego.accel_max * dt * shrink, ego.omega_rate_max * dt * shrink
     v = np.clip(np.clip(action[0], last[0] - dv, last[0] + dv), ego.v_min, ego.v_max)
     w = np.clip(np.clip(action[1], last[1] - dw, last[1] + dw), -ego.omega_max, ego.omega_max)
-    w = turning(ego, w, v * shrink)
+    w = turn_limit(ego.curvature_max, w, v * shrink)  # a car turns only while it moves
     return np.array([v, w], dtype=float)
 
 
@@ -65,7 +64,7 @@ def manoeuvres(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
     path followers only with a finite corridor)."""
     ego, dt, N = scenario.ego, scenario.dt, scenario.horizon
     v_lim, w_lim = (ego.v_min, ego.v_max), (-ego.omega_max, ego.omega_max)
-    v_last, w_last = float(x0[4]), float(x0[5])
+    v_last, w_last, kappa = float(x0[4]), float(x0[5]), ego.curvature_max
     speed = {"brake": 0.0, "hold": v_last, "accelerate": ego.v_max, "reverse": ego.v_min}
     turn = {"": 0.0, "left": ego.omega_max, "right": -ego.omega_max}
     out = {}
@@ -73,18 +72,12 @@ def manoeuvres(scenario: Scenario, x0: np.ndarray) -> dict[str, np.ndarray]:
         v = ramp(v_last, speed[s], ego.accel_max * dt, v_lim, N)
         for t in TURNS:
             omega = ramp(w_last, turn[t], ego.omega_rate_max * dt, w_lim, N)
-            out[f"{s}_{t}" if t else s] = np.column_stack([v, turning(ego, omega, v), v])
+            out[f"{s}_{t}" if t else s] = np.column_stack([v, turn_limit(kappa, omega, v), v])
     if math.isfinite(scenario.path.corridor):
         for s in SPEEDS:
             v = ramp(v_last, speed[s], ego.accel_max * dt, v_lim, N)
-            out[f"{s}_{FOLLOW}"] = np.column_stack([v, turning(ego, pursuit(scenario, x0, v), v), v])
+            out[f"{s}_{FOLLOW}"] = np.column_stack([v, turn_limit(kappa, pursuit(scenario, x0, v), v), v])
     return out
-
-
-def turning(ego: Any, omega: np.ndarray, v: np.ndarray) -> np.ndarray:
-    r"""Turn rates ``omega`` [rad/s] a car can make at the speeds ``v`` [m/s]
-    (:func:`risk_env.models.dynamics.turn_limit` with ``ego.curvature_max``)."""
-    return turn_limit(ego.curvature_max, omega, v)
 
 
 def safest(risk: np.ndarray, clearance: np.ndarray, epsilon: float, outside: np.ndarray | None = None) -> int:
