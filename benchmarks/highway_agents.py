@@ -163,6 +163,8 @@ def make_driver(agent: HighwayAgent, env: Any, args: Any, predictor: str) -> Any
     options: dict[str, Any] = {"risk": agent.variant, "mode_threshold": args.mode_threshold}
     if args.max_solve_time is not None:
         options["max_solve_time"] = args.max_solve_time
+    if getattr(args, "restart_standing", False):
+        options["restart_standing"] = True
     if agent.kind == "smpc":
         options["risk_tolerance"] = agent.tolerance
         if agent.budget is not None:
@@ -324,6 +326,11 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         help="while the gate is closed the applied speed is clipped so too: nothing passes the line",
     )
     parser.add_argument(
+        "--gate-follow",
+        action="store_true",
+        help="the agents follow road users ahead on the ego's route: their boxes span its corridor",
+    )
+    parser.add_argument(
         "--gate-approach-braking",
         type=cli.fraction,
         default=defaults.approach_braking,
@@ -346,5 +353,6 @@ def gate_settings(args: Any) -> Any:
         given_ego=getattr(args, "gate_given_ego", defaults.given_ego),
         slow_approach=getattr(args, "gate_slow_approach", defaults.slow_approach),
         hard_stop=getattr(args, "gate_hard_stop", defaults.hard_stop),
+        follow=getattr(args, "gate_follow", defaults.follow),
         approach_braking=getattr(args, "gate_approach_braking", defaults.approach_braking),
     )

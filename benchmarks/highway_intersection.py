@@ -173,6 +173,12 @@ def add_options(parser: argparse.ArgumentParser, agents: str, predictors: str, o
         " lock: |omega| <= kappa v (Ego.curvature_max); off: the paper's unicycle, which turns standing",
     )
     parser.add_argument(
+        "--restart-standing",
+        action="store_true",
+        help="where the ego and its last plan stand, the MPCs also solve from cold and keep the cheaper"
+        " plan (restart_standing)",
+    )
+    parser.add_argument(
         "--car-discs",
         type=cli.positive_int,
         default=1,

@@ -241,6 +241,7 @@ def radius_text(args: Any) -> str:
     radius = getattr(args, "object_radius", ADAPTER_OBJECT_RADIUS)
     discs = getattr(args, "car_discs", 1)
     turning = ", the MPCs turning as the car does" if getattr(args, "car_turning", False) else ""
+    turning += ", restarting standing plans" if getattr(args, "restart_standing", False) else ""
     if discs > 1:
         return f", the MPCs' cars {discs} discs each{turning}"
     return turning if radius == ADAPTER_OBJECT_RADIUS else f", the MPCs' object discs {radius:g} m{turning}"

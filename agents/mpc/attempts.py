@@ -19,6 +19,8 @@ from agents.mpc.nlp.solver import Problem
 
 Guess = tuple[np.ndarray, np.ndarray | None, np.ndarray | None]
 """An initial point: w ``(n_w,)`` and, for IPOPT's warm start, the multipliers lam_x and lam_g."""
+STANDING = 0.1
+"""Speed [m/s] below which the ego and a planned input stand (:func:`stands`)."""
 TIME_LIMITED = ("Maximum_WallTime_Exceeded", "Maximum_CpuTime_Exceeded")
 """IPOPT's return statuses at its time limits."""
 Outcome = tuple[dict[str, np.ndarray], str, bool, int, dict[str, float]]
@@ -157,3 +159,11 @@ def warm_guess(
         where = shift_map(old, problem, kind, cache)
         lam.append(np.where(where >= 0, values[np.maximum(where, 0)], 0.0))
     return w0, lam[0], lam[1]
+
+
+def stands(restart: bool, memory: dict[str, Any] | None, x0: np.ndarray) -> bool:
+    """Whether a step restarts a standing plan (``restart``: the agent's ``restart_standing``): the ego
+    at state ``x0`` and every input of its last plan (``memory["plan"]``) stand, below :data:`STANDING`."""
+    if not restart or memory is None or memory.get("plan") is None:
+        return False
+    return abs(float(x0[4])) < STANDING and float(np.max(np.abs(memory["plan"][:, 0]))) < STANDING

@@ -69,6 +69,7 @@ class PathFollowingMPC(RiskForm):
             ``$RISKMPC_JIT_CACHE`` or ``~/.cache/riskcrossing/jit``.
         tol, max_iter: solver tolerance and iteration limit.
         warm_start: start from the shifted previous solution (IPOPT: with its multipliers).
+        restart_standing: where the ego and its last plan stand, also solve from cold (keep the cheaper).
         backoff: the risk rows ask $\mathrm{margin}_n \ge \mathrm{backoff}$ (margin units: metres of
             clearance, or risk over the severity's scale), so a converged plan stays a hair off the
             boundary where the worst-case risk's hard indicator jumps, and float32 observations
@@ -118,6 +119,7 @@ class PathFollowingMPC(RiskForm):
         tol: float = 1e-4,
         max_iter: int = 150,
         warm_start: bool = True,
+        restart_standing: bool = False,
         backoff: float = 1e-3,
         cold_starts: int = 3,
         solver_options: dict[str, Any] | None = None,
@@ -165,6 +167,7 @@ class PathFollowingMPC(RiskForm):
             tol=tol,
             max_iter=max_iter,
             warm_start=bool(warm_start),
+            restart_standing=bool(restart_standing),
             solver_options=dict(solver_options or {}),
             time_limit=self.max_solve_time if math.isfinite(self.max_solve_time) else None,
             rungs=RUNGS if math.isfinite(self.max_solve_time) else 1,
@@ -371,17 +374,14 @@ class PathFollowingMPC(RiskForm):
         self._speed_limit = math.inf if inf else checks.positive("speed_limit", value, strict=False)
 
     def _measure(self, index: int, obs_vec: np.ndarray) -> StepInput:
-        r"""The step's data from the observation: the memory (dropped for a new episode), $x_0$, each
-        present slot's beliefs at $n = 1, \dots, N$, the active slots, the NLP variant, the risk data and
-        the solver parameters."""
+        r"""The step's data from the observation: the memory (None: a new episode), $x_0$, each present
+        slot's beliefs at $n = 1, \dots, N$, the active slots, the variant, the risk data, the parameters."""
         o = ob.split(obs_vec, slots=self.slots)
         memory = self._memory.get(index)
-        if memory is not None and measure.new_episode(memory, o):
-            memory = None
+        memory = None if memory is None or measure.new_episode(memory, o) else memory
         x0 = measure.measured_state(self.scenario, o)
         futures, weights, hypotheses = self._slots.beliefs(self._problem("free"), o)
-        # a row is active when its object is present, its mode counts (the RMPC: its hypothesis's
-        # weight >= w_min) and it may reach the ego within the horizon
+        # active: present, counted (the RMPC: hypothesis weight >= w_min), may reach the ego in time
         floor = self.mode_threshold if not self.WEIGHTED else 0.0
         counts = [f is not None and weights[k] > 0 and hypotheses[k] >= floor for k, f in enumerate(futures)]
         active = np.array([c and self._risk_possible(x0, futures[k], k) for k, c in enumerate(counts)])

@@ -157,6 +157,7 @@ class Step:
         self.variant, self.data, self.p = data.variant, data.data, data.p
         self.base = context.problem("free")
         self.manoeuvre_time = context.manoeuvre_time
+        self.stands = attempts.stands(context.settings.restart_standing, data.memory, data.x0)
         self.tally = Tally()
 
     # ------------------------------------------------------------------ the levels
@@ -168,7 +169,7 @@ class Step:
         # elastic mode: after a step that missed the risk bound, the hard problem is most likely
         # infeasible still; its exact penalty (b) gives its solution where it is feasible
         last = self.memory.get("violation", 0.0) if self.memory is not None else 0.0
-        elastic = self.variant != "free" and last > FEASIBLE_SLACK
+        elastic = self.variant != "free" and last > FEASIBLE_SLACK and not self.stands
         out, retried = (None, False) if elastic else self.hard(pr, budget.reserve)
         kind, violation = None, 0.0
         if out is None and self.variant != "free":
@@ -232,8 +233,9 @@ class Step:
         # after a manoeuvre its continuation is a poor start for path following: the best
         # rollout first, then that
         after_manoeuvre = warm and mem.get("manoeuvre", False)
-        points = self.guesses(pr, extra=False, cold=not warm or after_manoeuvre, cold_first=after_manoeuvre)
-        out, _ = self.solve(pr, points, reserve, keep_best=first, reserve_after=self.manoeuvre_time)
+        cold, best = not warm or after_manoeuvre or self.stands, first or self.stands
+        points = self.guesses(pr, extra=False, cold=cold, cold_first=after_manoeuvre)
+        out, _ = self.solve(pr, points, reserve, keep_best=best, reserve_after=self.manoeuvre_time)
         return out, out is not None and self.tally.failed_calls > 0
 
     def soft(self, soft: Problem, elastic: bool) -> tuple[Outputs | None, float]:

@@ -64,6 +64,8 @@ from risk_env.highway.control import highway_action
 from risk_env.highway.gate import JunctionGate, check_gate, make_gate
 from risk_env.highway.idm import IDMEgo, reached
 from risk_env.highway.lane_agents import lane_agent, lane_scenario, prepare_route
+from risk_env.highway.lanes.follow import Leaders
+from risk_env.highway.lanes.routes import Route
 from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
 from risk_env.highway.tracking import TRACK_GATE, measure
@@ -169,6 +171,7 @@ class IntersectionAdapter:
         self.gate: JunctionGate | None = None  # the junction gate (None: off), at the first episode
         self._gate_on = check_gate(gate)  # its settings, or None: off
         self._agent_predictor: Predictor | None = None
+        self._leader_route: Route | None = None  # with the gate's follow: the route as lanes
         self._ready = False
         self.warm_up = bool(warm_up)
         self.build_time = 0.0
@@ -253,6 +256,9 @@ class IntersectionAdapter:
         progress = self.route.progress(self.lane, x, y)
         signals = turn_signals(base, observation)  # None unless the env observes them
         virtual = np.zeros((0, 5)) if self.gate is None else self.gate.step(progress, speed, others, signals)
+        if self._leader_route is not None:  # the gate's follow: road users ahead are followed
+            corridor = scenario.path.corridor
+            self._agent_predictor.leaders = Leaders(self._leader_route, (x, y), corridor)
         self.last_objects = others[nearest[: self.slots - len(virtual)]]
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
@@ -296,6 +302,8 @@ class IntersectionAdapter:
             self.gate, self._agent_predictor = gate
             self._ready = True
         self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
+        follow = self.gate is not None and self._gate_on.follow and self._agent_predictor is not None
+        self._leader_route = Route(base.road.network, self.route.lanes) if follow else None
         self.lane = 0
         if self.warm_up:
             args = (self.base_scenario, self.make_agent, self.slots, self._agent_predictor)

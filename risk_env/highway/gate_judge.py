@@ -94,6 +94,10 @@ class GateSettings:
     approach_braking: float = 0.5
     r"""The share $b$ of the ego's largest braking $a$ that the slow approach and the hard stop brake with:
     their speed is $\sqrt{2 b a d}$ (0.5: $\sqrt{a d}$; 1: the latest full stop), in (0, 1]."""
+    follow: bool = False
+    """Whether the agents' predictor widens the boxes of road users ahead on the ego's route across
+    its corridor, so that the ego follows them and never passes beside
+    (:func:`~risk_env.highway.lanes.follow.follow_leaders`)."""
 
 
 NEAR_STEPS = 6

@@ -17,6 +17,7 @@ import numpy as np
 
 from risk_env import checks
 from risk_env.highway.common import policy_period, unwrapped_highway, vehicle_measurement
+from risk_env.highway.lanes.follow import Leaders, follow_leaders
 from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
 from risk_env.prediction.belief import Belief
 from risk_env.prediction.mixture import Mixture
@@ -119,6 +120,9 @@ class GatePredictor(Predictor):
         self.ego_plan: EgoPlan | None = None
         """What the ego does this step for a lane predictor's prediction given it (the gate's
         ``given_ego`` and open: it drives its route), or None (it brakes)."""
+        self.leaders: Leaders | None = None
+        """The ego's route, position and corridor this step when the road users ahead on its route are
+        boxes it follows (:func:`~risk_env.highway.lanes.follow.follow_leaders`), else None."""
 
     def predict(self, measurement: Any, steps: int) -> Mixture:
         return self.predict_scene(np.asarray(measurement, dtype=float)[None], steps)[0]
@@ -126,7 +130,9 @@ class GatePredictor(Predictor):
     def predict_scene(self, measurements: Any, steps: int) -> list[Mixture]:
         rows = np.asarray(measurements, dtype=float).reshape(-1, 5)
         virtual = is_virtual(rows, self.virtual)
-        real = iter(self._inner(rows[~virtual], steps) if (~virtual).any() else [])
+        real_rows = rows[~virtual]
+        inner = self._inner(real_rows, steps) if len(real_rows) else []
+        real = iter(inner if self.leaders is None else follow_leaders(inner, self.leaders))
         return [standing(row, steps) if v else next(real) for row, v in zip(rows, virtual, strict=True)]
 
     def _inner(self, rows: np.ndarray, steps: int) -> list[Mixture]:

@@ -30,6 +30,7 @@ class SolverSettings:
     tol: float = 1e-4
     max_iter: int = 150
     warm_start: bool = True
+    restart_standing: bool = False
     solver_options: dict[str, Any] = field(default_factory=dict)
     time_limit: float | None = None
     """The wall-time cap of a step [s] (None: none): IPOPT's own ``max_wall_time`` at the largest
