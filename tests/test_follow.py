@@ -123,3 +123,42 @@ def test_bad_leaders_are_named(route):
         Leaders(route, (0.0, 0.0), -1.0)
     with pytest.raises(ValueError, match="Leaders.position"):
         Leaders(route, (np.nan, 0.0), 1.0)
+
+
+def test_following_needs_a_predictor_of_the_lanes():
+    from risk_env.highway import IntersectionAdapter
+    from risk_env.highway.gate_judge import GateSettings
+
+    with pytest.raises(ValueError, match="GateSettings.follow"):
+        IntersectionAdapter(
+            make_intersection_env(), object, gate=GateSettings(follow=True), predictor="constant"
+        )
+
+
+def test_the_adapter_hands_the_agents_predictor_the_ego_each_step():
+    """With ``follow`` the agents' predictor gets the ego's route and position every step; without, none."""
+    from risk_env.highway import IntersectionAdapter
+    from risk_env.highway.gate_judge import GateSettings
+
+    class Stub:
+        def __init__(self, scenario, object_slots, predictor=None):
+            self.predictor = predictor
+
+        def predict(self, obs, episode_start=None, deterministic=True):
+            return np.array([6.0, 0.0]), None
+
+    for follow in (True, False):
+        env = make_intersection_env()
+        adapter = IntersectionAdapter(env, Stub, slots=3, gate=GateSettings(follow=follow), predictor="lane")
+        obs, _ = env.reset(seed=1)
+        adapter.reset()
+        for _ in range(2):
+            seen = env.unwrapped.vehicle.position.copy()  # where the ego is when the adapter acts
+            obs, *_ = env.step(adapter.predict(obs)[0])
+        leaders = adapter.gate.wrapper.leaders
+        if not follow:
+            assert leaders is None
+            continue
+        assert leaders.route.lanes == tuple(adapter.route.lanes)
+        np.testing.assert_allclose(leaders.position, seen, atol=0.05)  # observed as float32
+        assert leaders.corridor == adapter.scenario.path.corridor

@@ -213,7 +213,8 @@ class Step:
         """Level (a): ``(the best converged call or None, whether it followed a failed call)``.
         An episode's first step solves from every rollout (up to ``cold_starts``) and keeps the
         plan of least cost, unless a pilot plan converged first; a later step solves from the
-        shifted plan only: when that fails, the soft problem, from the shifted plan and the cold
+        shifted plan only (where it stands, with ``restart_standing``, from the rollouts too, keeping
+        the cheaper plan): when that fails, the soft problem, from the shifted plan and the cold
         rollouts, gives the hard problem's solution where there is one (the penalty is exact),
         and the least violation where there is none."""
         ctx, mem = self.context, self.memory

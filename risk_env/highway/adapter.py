@@ -170,6 +170,8 @@ class IntersectionAdapter:
         self._agents: dict[ReferencePath, Any] = {}
         self.gate: JunctionGate | None = None  # the junction gate (None: off), at the first episode
         self._gate_on = check_gate(gate)  # its settings, or None: off
+        if self._gate_on is not None and self._gate_on.follow and predictor in (None, "constant"):
+            raise ValueError("GateSettings.follow needs a predictor of the lanes, got the paper's (constant)")
         self._agent_predictor: Predictor | None = None
         self._leader_route: Route | None = None  # with the gate's follow: the route as lanes
         self._ready = False
