@@ -11,7 +11,7 @@ pytest.importorskip("highway_env")
 
 from risk_env.highway import make_intersection_env  # noqa: E402
 from risk_env.highway.gate import GatePredictor  # noqa: E402
-from risk_env.highway.lanes.follow import Leaders, follow_leaders, locate  # noqa: E402
+from risk_env.highway.lanes.follow import Leaders, follow_leaders  # noqa: E402
 from risk_env.highway.lanes.routes import Route  # noqa: E402
 from risk_env.highway.route import RoutePath  # noqa: E402
 from risk_env.prediction.belief import Belief  # noqa: E402
@@ -49,7 +49,7 @@ def car(route: Route, s: np.ndarray, r: float = 0.0, backwards: bool = False) ->
 def test_locate_returns_the_arc_length_and_the_offset(route):
     s = np.array([5.0, 30.0, route.length - 5.0])
     for r in (0.0, 1.5, -1.0):
-        found_s, found_r = locate(route, route.position(s, r))
+        found_s, found_r = route.locate_many(route.position(s, r))
         np.testing.assert_allclose(found_s, s, atol=0.05)
         np.testing.assert_allclose(found_r, r, atol=0.05)
 

@@ -7,6 +7,7 @@ and stays smooth and exact as $\omega \to 0$ (a straight line).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import casadi as ca
@@ -52,7 +53,7 @@ def turn_limit(curvature_max: float, omega: Any, v: Any) -> Any:
     r"""Turn rates ``omega`` [rad/s] within $|\omega| \le \kappa_{max} \max(v, 0)$ at the speeds ``v``
     [m/s], $\kappa_{max}$ = ``curvature_max`` [1/m] (:attr:`risk_env.scenario.parts.Ego.curvature_max`):
     a car turns only while it moves. Unchanged when $\kappa_{max}$ is infinite (the paper's unicycle)."""
-    if not np.isfinite(curvature_max):
+    if not math.isfinite(curvature_max):  # a scalar: math's test, not numpy's, on the env's hot path
         return omega
     bound = curvature_max * np.maximum(v, 0.0)
     return np.clip(omega, -bound, bound)

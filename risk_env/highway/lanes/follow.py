@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from risk_env import checks
-from risk_env.highway.lanes.routes import GRID, PAD, Route, wrap
+from risk_env.highway.lanes.routes import Route, wrap
 from risk_env.prediction.mixture import Mixture
 
 LEADER_CONE = math.pi / 4
@@ -46,34 +46,19 @@ class Leaders:
         checks.positive("Leaders.corridor", self.corridor)
 
 
-def locate(route: Route, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(s, r)`` [m], each of shape ``points.shape[:-1]``: the arc length and lateral offset (left
-    positive) of ``points (..., 2)`` [m] at the route's nearest sample (its tangent line there)."""
-    p = np.asarray(points, dtype=float)
-    flat = p.reshape(-1, 2)
-    xyh = route.samples
-    d2 = (flat[:, None, 0] - xyh[None, :, 0]) ** 2 + (flat[:, None, 1] - xyh[None, :, 1]) ** 2
-    k = np.argmin(d2, axis=1)
-    dx, dy = flat[:, 0] - xyh[k, 0], flat[:, 1] - xyh[k, 1]
-    c, s = np.cos(xyh[k, 2]), np.sin(xyh[k, 2])
-    along = k * GRID - PAD + dx * c + dy * s
-    across = -dx * s + dy * c
-    return along.reshape(p.shape[:-1]), across.reshape(p.shape[:-1])
-
-
 def follow_leaders(mixtures: list[Mixture], leaders: Leaders) -> list[Mixture]:
     r"""``mixtures`` with each mode's truncation box widened across, $h_y \ge |r| + c$ ($r$: the
     mean's offset from the route, $c$: the corridor), at every stage $n \ge 1$ where its mean lies
     ahead of the ego on its route (within :data:`LANE_HALF_WIDTH` of the centreline, heading within
     :data:`LEADER_CONE` of it); every other stage and mode as it was."""
-    ego_s = float(locate(leaders.route, np.asarray(leaders.position, dtype=float))[0])
+    ego_s = float(leaders.route.locate_many(np.asarray(leaders.position, dtype=float))[0])
     out = []
     for mixture in mixtures:
         modes = []
         for mode in mixture.modes:
             b = mode.beliefs
             x, y = np.asarray(b.x, dtype=float), np.asarray(b.y, dtype=float)
-            s, r = locate(leaders.route, np.stack([x, y], axis=-1))
+            s, r = leaders.route.locate_many(np.stack([x, y], axis=-1))
             heading = leaders.route.heading(s)
             ahead = (s > ego_s) & (np.abs(r) <= LANE_HALF_WIDTH)
             ahead &= np.abs(wrap(np.asarray(b.theta, dtype=float) - heading)) <= LEADER_CONE

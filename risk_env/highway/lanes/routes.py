@@ -219,6 +219,25 @@ class Route:
                 best = (score, float(self.offsets[k]) + s, r)
         return best[1], best[2]
 
+    def locate_many(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`locate` of every point of ``points (..., 2)`` [m] at once: ``(s, r)``, each of shape
+        ``points.shape[:-1]`` (the same lane choice; coordinates by :func:`lane_coordinates`, which agree
+        with highway-env's to rounding)."""
+        p = np.asarray(points, dtype=float)
+        flat = p.reshape(-1, 2)
+        best = np.full(len(flat), np.inf)
+        s_out, r_out = np.zeros(len(flat)), np.zeros(len(flat))
+        last = len(self.lanes) - 1
+        for k, lane in enumerate(self.objects):
+            s, r = lane_coordinates(lane, flat)
+            outside = np.maximum(-s, 0.0) * (k > 0) + np.maximum(s - float(lane.length), 0.0) * (k < last)
+            score = np.abs(r) + outside
+            better = score < best
+            best = np.where(better, score, best)
+            s_out = np.where(better, self.offsets[k] + s, s_out)
+            r_out = np.where(better, r, r_out)
+        return s_out.reshape(p.shape[:-1]), r_out.reshape(p.shape[:-1])
+
     def label(self) -> str:
         """The route as ``from>to>...`` of its nodes, e.g. ``"o0>ir0>il1>o1"``."""
         return ">".join([self.lanes[0][0], *(index[1] for index in self.lanes)])
