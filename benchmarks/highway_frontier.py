@@ -6,14 +6,15 @@
 
 Runs the agents of :mod:`benchmarks.highway_intersection` (the same options, episode runner and
 tables) over the same seeds, by default the RMPC, the SMPC at the episode budgets 0.01, 0.02, 0.05
-and 0.1, and highway-env's IDM, each MPC with the lane predictor and with the paper's
-(``--predictor lane,constant``), and draws ``frontier.png``: every agent's goal rate against its
-collision rate, each with its Wilson 95 % interval. The lane predictor's points are filled, the
-paper's (``constant``) hollow, any other predictor's half filled; the SMPC's budgets are joined
-in order of B and labelled; the shaded quadrant is where an agent beats the IDM on both axes (a
-goal rate at least the IDM's with fewer collisions). Outputs in ``--out``, one output set
-(``--resume`` goes on after an interruption): ``frontier.png``, ``frontier.md`` (the tables and
-which agents beat the IDM), ``frontier.csv`` and ``frontier_episodes.csv``.
+and 0.1, and highway-env's IDM, each MPC with the lane predictor and with the paper's (``--predictor
+lane,constant``), and draws ``frontier.png``: every agent's goal rate against its collision rate,
+each with its Wilson 95 % interval. The lane predictor's points (and its variants',
+``lane+interval``) are filled, the paper's (``constant``) hollow, any other predictor's half filled;
+the SMPC's budgets are joined in order of B and labelled; the shaded quadrant is where an agent
+beats the IDM on both axes (a goal rate at least the IDM's with fewer collisions). Outputs in
+``--out``, one output set (``--resume`` goes on after an interruption): ``frontier.png``,
+``frontier.md`` (the tables and which agents beat the IDM), ``frontier.csv`` and
+``frontier_episodes.csv``.
 """
 
 from __future__ import annotations
@@ -39,7 +40,13 @@ PREDICTOR_NAMES = {"constant": "the paper's"}
 PREDICTOR_STYLE = {"lane": "-", "constant": "--"}
 """Line style of the SMPC's budget curve with each predictor (others dotted)."""
 PREDICTOR_FILL = {"lane": "full", "constant": "none"}
-"""Marker fill of each predictor's points (others half filled, ``"left"``)."""
+"""Marker fill of each predictor family's points (others half filled, ``"left"``)."""
+
+
+def family(predictor: str) -> str:
+    """The predictor's family for the figure's marks: ``"lane"`` for the lane predictor and its
+    variants (``lane+interval``, ...), else the name itself."""
+    return "lane" if predictor.split("+")[0] == "lane" else predictor
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -119,14 +126,14 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             ms=13 if kind in REFERENCES else 8,
             ls="none",
             color=colour,
-            fillstyle=PREDICTOR_FILL.get(s["predictor"], "left") if s["predictor"] else "full",
+            fillstyle=PREDICTOR_FILL.get(family(s["predictor"]), "left") if s["predictor"] else "full",
             markerfacecoloralt="white",
             mew=1.6,
             label=label,
         )
     for pred, points in curves.items():
         _, xs, ys = zip(*sorted(points), strict=True)
-        ax.plot(xs, ys, ls=PREDICTOR_STYLE.get(pred, ":"), color=COLOURS["smpc"], lw=1, alpha=0.7)
+        ax.plot(xs, ys, ls=PREDICTOR_STYLE.get(family(pred), ":"), color=COLOURS["smpc"], lw=1, alpha=0.7)
     for (x, y), budgets in tags.items():  # budgets on the same point share one label
         text = "B=" + ", ".join(f"{b:g}" for b in sorted(set(budgets)))
         ax.annotate(text, (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
@@ -169,18 +176,27 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     with out:
         summary, rows, wall = run(args, out)
         write_csvs(out.dir, "frontier", summary, rows)
-        text = markdown(summary, args, wall, out.command_line.strip()) + verdicts(summary)
-        # the tables as a section that a docs page can include (the figure's path is this folder's)
-        text = f"<!-- --8<-- [start:tables] -->\n{text}<!-- --8<-- [end:tables] -->\n"
-        text += "\n![frontier](frontier.png)\n"
-        (out.dir / "frontier.md").write_text(text)
-        title = (
-            f"{args.env}, {args.duration:g} s, spawn {args.spawn_probability:g}, seeds {args.seed}.."
-            f"{args.seed + args.episodes - 1} (N = {args.episodes} each)"
-        )
-        draw_frontier(summary, out.dir / "frontier.png", title)
+        tables = markdown(summary, args, wall, out.command_line.strip()) + verdicts(summary)
+        world = (args.env, args.duration, args.spawn_probability, args.seed, args.episodes)
+        text = publish(out.dir, "frontier", tables, summary, title(*world))
     print(text)
     return summary
+
+
+def title(env: str, duration: float, spawn: float, seed: int, episodes: int, note: str = "") -> str:
+    """The figure's title: the episodes every point was measured on (``note``: appended)."""
+    seeds = f"seeds {int(seed)}..{int(seed + episodes - 1)} (N = {int(episodes)} each{note})"
+    return f"{env}, {duration:g} s, spawn {spawn:g}, {seeds}"
+
+
+def publish(folder: Path, name: str, tables: str, summary: list[dict[str, Any]], heading: str) -> str:
+    """Write ``NAME.md`` (``tables`` as a section a docs page can include, then the figure) and draw
+    ``NAME.png`` (:func:`draw_frontier`, titled ``heading``) in ``folder``; the Markdown."""
+    text = f"<!-- --8<-- [start:tables] -->\n{tables}<!-- --8<-- [end:tables] -->\n"
+    text += f"\n![frontier]({name}.png)\n"
+    (folder / f"{name}.md").write_text(text)
+    draw_frontier(summary, folder / f"{name}.png", heading)
+    return text
 
 
 if __name__ == "__main__":

@@ -155,6 +155,7 @@ SMALLEST = {
     "exact_accuracy": {"--beliefs": "20"},
     "highway_intersection": {"--episodes": "1", "--workers": "1"},
     "highway_frontier": {"--episodes": "1", "--workers": "1"},
+    "highway_frontier_runs": {},
     "highway_render": {"--max-steps": "2"},
     "prediction": {"--episodes": "1", "--duration": "1", "--workers": "1"},
     "train_ppo": {
@@ -174,6 +175,9 @@ FAST = {
     "python -m benchmarks.env_speed --repeat 10 --out docs/results",
     "python -m benchmarks.vector_speed --num-envs 1,8,64 --modes vector_entry_point,sync,async",
     "python -m benchmarks.rollout --agent smpc:exact --uncertainty medium --tolerance 1000",
+    "python -m benchmarks.highway_frontier_runs --runs docs/results/highway/restart/40s_200"
+    " docs/results/highway/restart/40s_200_smpc docs/results/highway/hardstop/40s_200_idm"
+    " --out results/highway/frontier_runs",
 }
 """The examples the default test run runs (the others are marked slow). Two more run in it as other
 tests: ``table2 --agents rmpc:worst_case,smpc:exact --uncertainty low`` at its smallest here is
@@ -257,9 +261,10 @@ TEXT = {
     "uncertainty": ["", "extreme"],
     "tolerances": ["", "-5", "x"],
     "interval": ["bogus", "split_yield,bogus"],
+    "runs": ["", "no/such/folder"],
 }
 """Bad values of the plain-text flags (train_ppo's --name, --uncertainty, --tolerances; the
-highway benchmarks' --interval)."""
+highway benchmarks' --interval; highway_frontier_runs' --runs)."""
 
 
 def bad_values(action: argparse.Action) -> list[str]:

@@ -1,0 +1,205 @@
+"""The intersection's frontier drawn from runs already made: goal rate against collision rate.
+
+    python -m benchmarks.highway_frontier_runs --runs docs/results/highway/restart/40s_200 \\
+        docs/results/highway/restart/40s_200_smpc docs/results/highway/hardstop/40s_200_idm \\
+        --out results/highway/frontier_runs
+
+Reads the summary (``NAME.csv``) and manifest (``NAME.manifest.json``) of each run of
+``highway_intersection`` or ``highway_frontier`` in ``--runs`` (one folder each) and draws their
+agents on one frontier (:func:`benchmarks.highway_frontier.draw_frontier`), so that runs of their
+own options (the RMPC's, each SMPC budget's, the IDM's) are set side by side without running them
+again. Points are comparable only on the same episodes: every run must have driven the same
+environment, seeds, duration, spawn probability and initial vehicles (else an error naming the
+setting and the runs); an agent (with its predictor) found in two runs is drawn once if its outcomes
+agree there (the IDM beside each planner), and is an error if they do not. Outputs in
+``--out``: ``frontier_runs.png``, ``frontier_runs.md`` (the table, which agents beat the IDM, and
+each run's command and commit) and ``frontier_runs.csv`` (the runs' summary rows, each with its
+folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+from benchmarks import cli, highway_intersection
+from benchmarks.highway_frontier import publish, title, verdicts
+
+FILES = ("frontier_runs.png", "frontier_runs.md", "frontier_runs.csv")
+"""The files a run writes in ``--out``."""
+SETS = ("intersection", "frontier")
+"""The output sets whose summaries this draws."""
+WORLD = ("env", "seed", "episodes", "duration", "spawn_probability", "initial_vehicles")
+"""The options that make two runs' episodes the same episodes."""
+SAME = ("episodes", "goal", "collision", "ego_into_vehicle", "vehicle_into_ego", "deadlock")
+"""The outcomes by which an agent found in two runs is the same agent (drawn once), or not (an error)."""
+TEXT_FIELDS = frozenset({"agent", "predictor", "label", "run"})
+"""Summary columns kept as text (the others are numbers, or empty)."""
+
+
+class RunsError(ValueError):
+    """Runs that cannot be drawn together (the message names the setting and the folders)."""
+
+
+def existing_folder(text: str) -> Path:
+    """``type=`` of a folder that exists."""
+    path = Path(text)
+    if not text or not path.is_dir():
+        raise argparse.ArgumentTypeError(f"not a folder: {text!r}")
+    return path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m benchmarks.highway_frontier_runs``."""
+    parser = cli.parser("highway_frontier_runs", __doc__)
+    parser.add_argument(
+        "--runs",
+        type=existing_folder,
+        metavar="DIR",
+        nargs="+",
+        required=True,
+        help="run folders of highway_intersection or highway_frontier (default: none, required)",
+    )
+    cli.add_output_options(
+        parser, Path("results/highway/frontier_runs"), "folder for the figure, the table and the CSV"
+    )
+    return parser
+
+
+def _number(text: str) -> Any:
+    if text == "":
+        return ""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def read_run(folder: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The manifest and the summary rows (numbers as floats, each with its ``run`` folder) of the one
+    run of :data:`SETS` in ``folder``."""
+    found = [
+        folder / f"{name}.manifest.json" for name in SETS if (folder / f"{name}.manifest.json").is_file()
+    ]
+    if len(found) != 1:
+        what = "no run" if not found else "two runs"
+        raise RunsError(
+            f"{folder}: {what} of highway_intersection or highway_frontier (a NAME.manifest.json)"
+        )
+    manifest = json.loads(found[0].read_text())
+    summary = folder / f"{manifest['set']}.csv"
+    if not summary.is_file():
+        raise RunsError(f"{folder}: {summary.name} is missing (its manifest names it)")
+    with open(summary, newline="") as f:
+        rows = [
+            {k: v if k in TEXT_FIELDS else _number(v) for k, v in row.items()} | {"run": str(folder)}
+            for row in csv.DictReader(f)
+        ]
+    if not rows:
+        raise RunsError(f"{folder}: {summary.name} has no agent")
+    return manifest, rows
+
+
+def world(manifest: dict[str, Any]) -> dict[str, Any]:
+    """The :data:`WORLD` settings of a run (those its manifest lacks at the command's defaults)."""
+    defaults = highway_intersection.build_parser()
+    options = manifest.get("options", {})
+    return {key: options.get(key, defaults.get_default(key)) for key in WORLD}
+
+
+def gather(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The manifests and the summary rows of ``folders``, checked to share their episodes and to
+    name every agent (with its predictor) once (raises :class:`RunsError`)."""
+    if len({p.resolve() for p in folders}) != len(folders):
+        raise RunsError(f"a folder is named twice: {' '.join(map(str, folders))}")
+    manifests, rows = [], []
+    for folder in folders:
+        manifest, summary = read_run(folder)
+        manifests.append(manifest | {"folder": str(folder)})
+        rows += summary
+    first = world(manifests[0])
+    for manifest in manifests[1:]:
+        other = world(manifest)
+        for key in WORLD:
+            if other[key] != first[key]:
+                raise RunsError(
+                    f"the runs drove other episodes: {key} {first[key]!r} in {manifests[0]['folder']},"
+                    f" {other[key]!r} in {manifest['folder']}"
+                )
+    kept: dict[tuple[str, str], dict[str, Any]] = {}
+    for row in rows:
+        key = (row["agent"], row["predictor"])
+        if key not in kept:
+            kept[key] = row
+        elif any(row[k] != kept[key][k] for k in SAME):
+            who = f"{key[0]} ({key[1] or 'no predictor'})"
+            raise RunsError(f"{who} differs in two runs: {kept[key]['run']} and {row['run']}")
+    return manifests, list(kept.values())
+
+
+def _ci(s: dict[str, Any], key: str) -> str:
+    return f"{100 * s[f'{key}_rate']:.1f}% [{100 * s[f'{key}_ci_low']:.1f}, {100 * s[f'{key}_ci_high']:.1f}]"
+
+
+def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], command: str) -> str:
+    """The frontier's table, the verdicts against the IDM and the runs' commands."""
+    w = world(manifests[0])
+    seeds = f"{int(w['seed'])}..{int(w['seed'] + w['episodes'] - 1)}"
+    lines = [
+        f"`{command}`",
+        "",
+        f"{w['env']}, duration {w['duration']:g} s, spawn probability {w['spawn_probability']:g},"
+        f" {w['initial_vehicles']} initial vehicles, seeds {seeds} (the same episodes in every run)."
+        " Rates: % [Wilson 95 % interval].",
+        "",
+        "| agent | run | N | goal | collisions | ego drove into a vehicle | deadlocks | time to goal [s] |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for s in rows:
+        who = s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "")
+        ttg = (
+            "-"
+            if s["time_to_goal_s"] in ("", None) or s["time_to_goal_s"] != s["time_to_goal_s"]
+            else f"{s['time_to_goal_s']:.1f}"
+        )
+        lines.append(
+            f"| {who} | `{s['run']}` | {int(s['episodes'])} | {_ci(s, 'goal')} | {_ci(s, 'collision')} |"
+            f" {_ci(s, 'ego_into_vehicle')} | {int(s['deadlock'])} | {ttg} |"
+        )
+    lines.append(verdicts(rows))
+    lines += ["The runs:", ""]
+    for m in manifests:
+        commit = (m.get("git_commit") or "unknown")[:7]
+        lines.append(f"- `{m['folder']}` (commit {commit}): `{m['command']}`")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        manifests, rows = gather(args.runs)
+    except RunsError as error:
+        parser.error(f"--runs: {error}")
+    out = cli.open_output(parser, args, "frontier_runs", FILES, argv)
+    with out:
+        with open(out.dir / "frontier_runs.csv", "w", newline="") as f:
+            fields = list(dict.fromkeys(k for row in rows for k in row))
+            writer = csv.DictWriter(f, fieldnames=fields)
+            writer.writeheader()
+            writer.writerows(rows)
+        w = world(manifests[0])
+        episodes = (w["env"], w["duration"], w["spawn_probability"], w["seed"], w["episodes"])
+        heading = title(*episodes, note=f"; {len(manifests)} runs")
+        text = publish(
+            out.dir, "frontier_runs", markdown(manifests, rows, out.command_line.strip()), rows, heading
+        )
+    print(text)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
