@@ -27,6 +27,8 @@ from typing import Any
 
 from benchmarks import cli, highway_intersection
 from benchmarks.highway_frontier import publish, title, verdicts
+from benchmarks.highway_tables import RATES
+from benchmarks.sampled_rows import wilson
 
 FILES = ("frontier_runs.png", "frontier_runs.md", "frontier_runs.csv")
 """The files a run writes in ``--out``."""
@@ -34,8 +36,16 @@ SETS = ("intersection", "frontier")
 """The output sets whose summaries this draws."""
 WORLD = ("env", "seed", "episodes", "duration", "spawn_probability", "initial_vehicles")
 """The options that make two runs' episodes the same episodes."""
-SAME = ("episodes", "goal", "collision", "ego_into_vehicle", "vehicle_into_ego", "deadlock")
-"""The outcomes by which an agent found in two runs is the same agent (drawn once), or not (an error)."""
+SAME = (
+    "episodes",
+    "goal_rate",
+    "collision_rate",
+    "ego_into_vehicle_rate",
+    "vehicle_into_ego_rate",
+    "deadlock_rate",
+)
+"""The outcomes by which an agent found in two runs is the same agent (drawn once), or not (an error):
+those that both runs counted."""
 TEXT_FIELDS = frozenset({"agent", "predictor", "label", "run"})
 """Summary columns kept as text (the others are numbers, or empty)."""
 
@@ -95,19 +105,35 @@ def read_run(folder: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
         raise RunsError(f"{folder}: {summary.name} is missing (its manifest names it)")
     with open(summary, newline="") as f:
         rows = [
-            {k: v if k in TEXT_FIELDS else _number(v) for k, v in row.items()} | {"run": str(folder)}
+            {"predictor": ""}  # summaries made before --predictor have none
+            | {k: v if k in TEXT_FIELDS else _number(v) for k, v in row.items()}
+            | {"run": str(folder)}
             for row in csv.DictReader(f)
         ]
     if not rows:
         raise RunsError(f"{folder}: {summary.name} has no agent")
-    return manifest, rows
+    return manifest, [with_intervals(row) for row in rows]
+
+
+def with_intervals(row: dict[str, Any]) -> dict[str, Any]:
+    """``row`` with the Wilson interval of each of its rates that has none (summaries made before the
+    goal's interval was reported), from the rate and the episode count."""
+    out = dict(row)
+    for key in RATES:
+        rate = row.get(f"{key}_rate", "")
+        if rate != "" and row.get(f"{key}_ci_low", "") == "":
+            n = int(row["episodes"])
+            out[f"{key}_ci_low"], out[f"{key}_ci_high"] = wilson(round(float(rate) * n), n)
+    return out
 
 
 def world(manifest: dict[str, Any]) -> dict[str, Any]:
-    """The :data:`WORLD` settings of a run (those its manifest lacks at the command's defaults)."""
+    """The :data:`WORLD` settings of a run (those its manifest lacks, or has as None, at the
+    command's defaults: runs made before ``--duration`` drove highway-env's 13 s)."""
     defaults = highway_intersection.build_parser()
     options = manifest.get("options", {})
-    return {key: options.get(key, defaults.get_default(key)) for key in WORLD}
+    values = {key: options.get(key) for key in WORLD}
+    return {key: defaults.get_default(key) if value is None else value for key, value in values.items()}
 
 
 def gather(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
@@ -134,14 +160,27 @@ def gather(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, An
         key = (row["agent"], row["predictor"])
         if key not in kept:
             kept[key] = row
-        elif any(row[k] != kept[key][k] for k in SAME):
+        elif any(row[k] != kept[key][k] for k in SAME if k in row and k in kept[key]):
             who = f"{key[0]} ({key[1] or 'no predictor'})"
             raise RunsError(f"{who} differs in two runs: {kept[key]['run']} and {row['run']}")
     return manifests, list(kept.values())
 
 
 def _ci(s: dict[str, Any], key: str) -> str:
-    return f"{100 * s[f'{key}_rate']:.1f}% [{100 * s[f'{key}_ci_low']:.1f}, {100 * s[f'{key}_ci_high']:.1f}]"
+    """A rate with its Wilson interval, or "n/a" where the run did not count it."""
+    parts = [s.get(f"{key}_{part}", "") for part in ("rate", "ci_low", "ci_high")]
+    if any(p == "" for p in parts):
+        return "n/a"
+    rate, low, high = (100 * float(p) for p in parts)
+    return f"{rate:.1f}% [{low:.1f}, {high:.1f}]"
+
+
+def _cell(s: dict[str, Any], key: str, form: str) -> str:
+    """``s[key]`` formatted, "-" where it is NaN, "n/a" where the run did not count it."""
+    value = s.get(key, "")
+    if value == "":
+        return "n/a"
+    return "-" if value != value else format(value, form)
 
 
 def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], command: str) -> str:
@@ -160,14 +199,10 @@ def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], comman
     ]
     for s in rows:
         who = s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "")
-        ttg = (
-            "-"
-            if s["time_to_goal_s"] in ("", None) or s["time_to_goal_s"] != s["time_to_goal_s"]
-            else f"{s['time_to_goal_s']:.1f}"
-        )
         lines.append(
             f"| {who} | `{s['run']}` | {int(s['episodes'])} | {_ci(s, 'goal')} | {_ci(s, 'collision')} |"
-            f" {_ci(s, 'ego_into_vehicle')} | {int(s['deadlock'])} | {ttg} |"
+            f" {_ci(s, 'ego_into_vehicle')} | {_cell(s, 'deadlock', '.0f')} |"
+            f" {_cell(s, 'time_to_goal_s', '.1f')} |"
         )
     lines.append(verdicts(rows))
     lines += ["The runs:", ""]

@@ -90,7 +90,7 @@ def test_an_agent_in_two_runs_is_drawn_once_if_its_outcomes_agree(tmp_path):
     shutil.copytree(first, twin)
     _, rows = gather([first, twin])
     assert len(rows) == 1 and rows[0]["run"] == str(first)
-    edit_summary(twin, goal=1)
+    edit_summary(twin, goal_rate=0.5)
     with pytest.raises(RunsError, match=f"idm .* differs in two runs: {first} and {twin}"):
         gather([first, twin])
 
@@ -126,3 +126,25 @@ def test_the_lane_predictors_variants_are_marked_as_the_lane_predictor(predictor
     from benchmarks.highway_frontier import family
 
     assert family(predictor) == expected
+
+
+def test_runs_made_before_the_predictor_and_the_goals_interval_still_compose(tmp_path):
+    old, new = RESULTS, RESULTS / "hindsight"  # the paper's predictor at 13 s; the hindsight reference
+    manifests, rows = gather([old, new])
+    assert [r["agent"] for r in rows] == [
+        "rmpc:worst_case",
+        "smpc:exact:probability:0.01",
+        "idm",
+        "hindsight",
+    ]
+    rmpc = rows[0]
+    assert rmpc["predictor"] == "" and "goal_ci_low" not in next(iter(_summary(old)))
+    assert rmpc["goal_ci_low"] < rmpc["goal_rate"] < rmpc["goal_ci_high"]  # its Wilson interval, made up
+    assert highway_frontier_runs.world(manifests[0])["duration"] == 13.0  # None there: highway-env's 13 s
+    text = highway_frontier_runs.markdown(manifests, rows, "the command")
+    assert "| n/a |" in text  # deadlocks were not counted then
+
+
+def _summary(folder: Path) -> list[dict[str, str]]:
+    with open(folder / "intersection.csv", newline="") as f:
+        return list(csv.DictReader(f))
