@@ -331,6 +331,12 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         help="the agents follow road users ahead on the ego's route: their boxes span its corridor",
     )
     parser.add_argument(
+        "--gate-keep-open",
+        choices=[j for j in JUDGES if j != "rollout"],
+        default=defaults.keep_open,
+        help="the judge by which an open gate closes again before the ego commits (default: the gate's own)",
+    )
+    parser.add_argument(
         "--gate-approach-braking",
         type=cli.fraction,
         default=defaults.approach_braking,
@@ -355,4 +361,5 @@ def gate_settings(args: Any) -> Any:
         hard_stop=getattr(args, "gate_hard_stop", defaults.hard_stop),
         follow=getattr(args, "gate_follow", defaults.follow),
         approach_braking=getattr(args, "gate_approach_braking", defaults.approach_braking),
+        keep_open=getattr(args, "gate_keep_open", defaults.keep_open),
     )

@@ -65,6 +65,23 @@ def test_boxes_that_grow_close_the_gate_where_the_mean_car_leaves_it_open():
     assert gate(Crossing(), judge="footprint").decide(30.0, 5.0, near).closed
 
 
+def test_a_gate_kept_open_closes_again_only_for_its_keep_open_judges_conflict():
+    far, near = crossing_at(60.0, -80.0, 10.0), crossing_at(60.0, -30.0, 10.0)
+    empty = np.zeros((0, 5))
+    kept = gate(Crossing(growth=30.0), keep_open="footprint")
+    assert kept.decide(30.0, 5.0, far).closed  # never opened: judged by its boxes
+    assert not kept.decide(30.0, 5.0, empty).closed  # open with nobody about: not a gap taken
+    assert kept.decide(30.0, 5.0, far).closed
+    kept = gate(Crossing(growth=30.0), keep_open="footprint")
+    assert not kept.decide(30.0, 5.0, crossing_at(60.0, -400.0, 10.0)).closed  # a gap, taken
+    assert not kept.decide(30.0, 5.0, far).closed  # its boxes conflict, its mean car does not
+    assert kept.decide(30.0, 5.0, near).closed  # its mean car does
+    assert kept.decide(30.0, 5.0, far).closed  # closed again: judged by its boxes
+    plain = gate(Crossing(growth=30.0))
+    assert not plain.decide(30.0, 5.0, crossing_at(60.0, -400.0, 10.0)).closed
+    assert plain.decide(30.0, 5.0, far).closed  # without keep_open the boxes close it
+
+
 def test_the_near_judge_takes_the_boxes_over_the_horizon_and_the_mean_car_after():
     belief = Crossing(growth=30.0).predict(crossing_at(60.0, -20.0, 10.0)[0], 10).modes[0].beliefs
     near = judged(Mode(0.3, belief, "m"), "near").modes[0].beliefs
@@ -107,6 +124,8 @@ def test_the_settings_reach_the_gate_and_bad_ones_are_named():
         gate(Crossing(), judge="means")
     with pytest.raises(GateError, match="tolerance must lie in"):
         gate(Crossing(), tolerance=1.0)
+    with pytest.raises(ValueError, match="keep_open"):
+        gate(Crossing(), keep_open="rollout")
 
 
 class Recorder(Predictor):
@@ -198,9 +217,19 @@ def test_the_commands_defaults_are_the_adapters():
     args = highway_intersection.parse_args([])
     assert gate_settings(args) == GateSettings() and args.object_radius == ADAPTER_OBJECT_RADIUS
     args = highway_intersection.parse_args(
-        ["--gate-judge", "footprint", "--gate-tolerance", "0.1", "--gate-given-ego"]
+        [
+            "--gate-judge",
+            "footprint",
+            "--gate-tolerance",
+            "0.1",
+            "--gate-given-ego",
+            "--gate-keep-open",
+            "near",
+        ]
     )
-    assert gate_settings(args) == GateSettings(judge="footprint", tolerance=0.1, given_ego=True)
+    assert gate_settings(args) == GateSettings(
+        judge="footprint", tolerance=0.1, given_ego=True, keep_open="near"
+    )
     assert gate_settings(highway_intersection.parse_args(["--no-gate"])) is False
     from benchmarks.highway_agents import make_driver, resolve
     from risk_env.highway import make_intersection_env

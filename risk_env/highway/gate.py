@@ -63,6 +63,7 @@ from risk_env.highway.gate_judge import (
     GATE_THRESHOLD,
     JUDGES,
     GateSettings,
+    check_gate,
     conflict_chance,
     mode_conflict,
     travel_time,
@@ -117,19 +118,6 @@ HOLD_GAP = 0.5
 """Gap [m] between the ego's disc and the virtual object when it holds an ego past the line."""
 
 
-def check_gate(gate: Any) -> GateSettings | None:
-    """``gate`` as the gate's settings (``True``: the defaults), or None (``False``: off); a
-    :class:`GateError` naming ``gate`` for anything else."""
-    if isinstance(gate, GateSettings):
-        return gate
-    if not isinstance(gate, (bool, np.bool_)):
-        raise GateError(
-            f"gate must be True, False (the junction gate on or off) or a GateSettings, got"
-            f" {checks.describe(gate)}"
-        )
-    return GateSettings() if gate else None
-
-
 def junction_span(route: RoutePath) -> tuple[float, float] | None:
     """Route arc lengths ``(s_in, s_out)`` [m] of the route's first run of junction lanes (from an
     ``ir*`` node), or None when it crosses no junction."""
@@ -177,6 +165,7 @@ class JunctionGate:
         slow_approach: bool = False,
         hard_stop: bool = False,
         approach_braking: float = 0.5,
+        keep_open: str | None = None,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -199,6 +188,13 @@ class JunctionGate:
         """The chance of a conflict the gate accepts (0: none, every counted mode)."""
         if self.judge == "rollout" and tolerance:
             raise GateError(f"the rollout judge accepts no chance of a conflict, got tolerance={tolerance!r}")
+        modes = tuple(j for j in JUDGES if j != "rollout")
+        self.keep_open = None if keep_open is None else checks.text("keep_open", keep_open, modes)
+        """The judge by which an open gate closes again (None: :attr:`judge`; GateSettings.keep_open)."""
+        if self.judge == "rollout" and keep_open is not None:
+            raise GateError(
+                f"the rollout judge judges no mode to keep a gate open, got keep_open={keep_open!r}"
+            )
         self.given_ego = bool(given_ego)
         """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.slow_approach = bool(slow_approach)
@@ -219,7 +215,7 @@ class JunctionGate:
         """Steps this episode the gate was closed."""
         self.last = GateDecision(False, False)
         self._progress = self._held = -math.inf
-        self._was_closed = False
+        self._was_closed = self._taken = False
         self.refunded = 0.0
         """Risk charged to an SMPC's budget for the virtual object and given back (:meth:`refund`)."""
         self.wrapper: GatePredictor | None = None
@@ -231,7 +227,7 @@ class JunctionGate:
         planner's speed there)."""
         self.route, self.span = route, junction_span(route)
         self.speed_cap = min(lane_scenario(scenario, path).ego.v_ref for path in route.paths)
-        self.committed, self.closed_steps = False, 0
+        self.committed, self.closed_steps, self._taken = False, 0, False
         self._progress = self._held = -math.inf
         self.last = GateDecision(False, self.span is None)
 
@@ -256,7 +252,7 @@ class JunctionGate:
             self.last = GateDecision(False, True)
             return self.last
         if left > GATE_RANGE or not len(others):
-            self.last = GateDecision(False, False)
+            self.last, self._taken = GateDecision(False, False), False
             return self.last
         if self.judge == "rollout":  # the scene rolled out with the ego going (lanes.rollout)
             through = roll_out(self.predictor, np.asarray(others, dtype=float), self._plan(), signals).through
@@ -269,11 +265,12 @@ class JunctionGate:
         ego_out = travel_time(s + self.clearance - progress, speed, self.accel, self.speed_cap)
         steps = min(GATE_STEPS, math.ceil((float(ego_out.max()) + self.margin) / self.dt))
         slack, masses = math.inf, []
+        judge = self.keep_open if self._taken and self.keep_open is not None else self.judge
         for mixture in self._predict(np.asarray(others, dtype=float), steps, signals):
             mass = 0.0
             for mode in mixture.above(self.threshold):
                 apart, share = mode_conflict(
-                    mode, self.judge, points, self.clearance, self.dt, ego_in, ego_out, self.margin
+                    mode, judge, points, self.clearance, self.dt, ego_in, ego_out, self.margin
                 )
                 slack = min(slack, apart)
                 mass += mode.weight * share
@@ -281,7 +278,7 @@ class JunctionGate:
         chance = conflict_chance(masses)
         closed = slack < self.margin if self.tolerance == 0.0 else chance > self.tolerance
         self.closed_steps += closed
-        self.last = GateDecision(closed, False, slack)
+        self.last, self._taken = GateDecision(closed, False, slack), not closed
         return self.last
 
     def _predict(self, others: np.ndarray, steps: int, signals: list | None = None) -> list[Mixture]:

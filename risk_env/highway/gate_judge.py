@@ -46,6 +46,8 @@ from typing import Any
 
 import numpy as np
 
+from risk_env import checks
+from risk_env.highway.predictors import GateError
 from risk_env.models.frame import to_frame
 from risk_env.prediction.mixture import Mixture, Mode
 from risk_env.risk.disc import signed_box_distance
@@ -98,6 +100,24 @@ class GateSettings:
     """Whether the agents' predictor widens the boxes of road users ahead on the ego's route across
     its corridor, so that the ego follows them and never passes beside
     (:func:`~risk_env.highway.lanes.follow.follow_leaders`)."""
+    keep_open: str | None = None
+    """The judge (one of :data:`JUDGES` but ``"rollout"``) by which a gate that opened closes again
+    before the ego commits (None: its own ``judge``): a gap once taken is given up only for a
+    conflict that judge sees, so that a gate of boxes does not close for what is merely possible
+    while the ego drives to its line."""
+
+
+def check_gate(gate: Any) -> GateSettings | None:
+    """``gate`` as the gate's settings (``True``: the defaults), or None (``False``: off); a
+    :class:`GateError` naming ``gate`` for anything else."""
+    if isinstance(gate, GateSettings):
+        return gate
+    if not isinstance(gate, (bool, np.bool_)):
+        raise GateError(
+            f"gate must be True, False (the junction gate on or off) or a GateSettings, got"
+            f" {checks.describe(gate)}"
+        )
+    return GateSettings() if gate else None
 
 
 NEAR_STEPS = 6
