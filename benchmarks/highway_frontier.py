@@ -189,11 +189,13 @@ def title(env: str, duration: float, spawn: float, seed: int, episodes: int, not
     return f"{env}, {duration:g} s, spawn {spawn:g}, {seeds}"
 
 
-def publish(folder: Path, name: str, tables: str, summary: list[dict[str, Any]], heading: str) -> str:
-    """Write ``NAME.md`` (``tables`` as a section a docs page can include, then the figure) and draw
-    ``NAME.png`` (:func:`draw_frontier`, titled ``heading``) in ``folder``; the Markdown."""
+def publish(
+    folder: Path, name: str, tables: str, summary: list[dict[str, Any]], heading: str, notes: str = ""
+) -> str:
+    """Write ``NAME.md`` (``tables`` as a section a docs page can include, the figure, then ``notes``)
+    and draw ``NAME.png`` (:func:`draw_frontier`, titled ``heading``) in ``folder``; the Markdown."""
     text = f"<!-- --8<-- [start:tables] -->\n{tables}<!-- --8<-- [end:tables] -->\n"
-    text += f"\n![frontier]({name}.png)\n"
+    text += f"\n![frontier]({name}.png)\n" + (f"\n{notes}" if notes else "")
     (folder / f"{name}.md").write_text(text)
     draw_frontier(summary, folder / f"{name}.png", heading)
     return text

@@ -184,7 +184,7 @@ def _cell(s: dict[str, Any], key: str, form: str) -> str:
 
 
 def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], command: str) -> str:
-    """The frontier's table, the verdicts against the IDM and the runs' commands."""
+    """The frontier's table and the verdicts against the IDM."""
     w = world(manifests[0])
     seeds = f"{int(w['seed'])}..{int(w['seed'] + w['episodes'] - 1)}"
     lines = [
@@ -205,10 +205,15 @@ def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], comman
             f" {_cell(s, 'time_to_goal_s', '.1f')} |"
         )
     lines.append(verdicts(rows))
-    lines += ["The runs:", ""]
+    return "\n".join(lines) + "\n"
+
+
+def provenance(manifests: list[dict[str, Any]]) -> str:
+    """Each run's folder, command and commit (kept out of the tables a docs page includes)."""
+    lines = ["The runs:", ""]
     for m in manifests:
-        commit = (m.get("git_commit") or "unknown")[:7]
-        lines.append(f"- `{m['folder']}` (commit {commit}): `{m['command']}`")
+        commit = (m.get("git_commit") or "")[:7] or "unknown code"
+        lines.append(f"- `{m['folder']}` (run on {commit}): `{m['command']}`")
     return "\n".join(lines) + "\n"
 
 
@@ -229,9 +234,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
         w = world(manifests[0])
         episodes = (w["env"], w["duration"], w["spawn_probability"], w["seed"], w["episodes"])
         heading = title(*episodes, note=f"; {len(manifests)} runs")
-        text = publish(
-            out.dir, "frontier_runs", markdown(manifests, rows, out.command_line.strip()), rows, heading
-        )
+        tables = markdown(manifests, rows, out.command_line.strip())
+        text = publish(out.dir, "frontier_runs", tables, rows, heading, provenance(manifests))
     print(text)
     return rows
 

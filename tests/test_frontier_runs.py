@@ -57,6 +57,7 @@ def test_three_committed_runs_make_one_frontier(tmp_path, capsys):
     assert goal in text  # the run's own figures, not recomputed
     assert "- `rmpc:worst_case (lane+interval)`: no" in text
     assert text.count("python -m benchmarks.highway_intersection") == 3  # each run's command
+    assert text.index("[end:tables]") < text.index("The runs:")  # kept out of what a page includes
     assert (out / "frontier_runs.png").stat().st_size > 10_000
     assert (out / "frontier_runs.manifest.json").exists()
     with open(out / "frontier_runs.csv", newline="") as f:
