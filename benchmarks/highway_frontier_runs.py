@@ -4,7 +4,8 @@
         docs/results/highway/restart/40s_200_smpc docs/results/highway/hardstop/40s_200_idm \\
         --out results/highway/frontier_runs
 
-Reads the summary (``NAME.csv``) and manifest (``NAME.manifest.json``) of each run of
+Reads the summary (``NAME.csv``, checked against the SHA-256 its manifest recorded) and manifest
+(``NAME.manifest.json``) of each run of
 ``highway_intersection`` or ``highway_frontier`` in ``--runs`` (one folder each) and draws their
 agents on one frontier (:func:`benchmarks.highway_frontier.draw_frontier`), so that runs of their
 own options (the RMPC's, each SMPC budget's, the IDM's) are set side by side without running them
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 from pathlib import Path
 from typing import Any
@@ -103,6 +105,11 @@ def read_run(folder: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     summary = folder / f"{manifest['set']}.csv"
     if not summary.is_file():
         raise RunsError(f"{folder}: {summary.name} is missing (its manifest names it)")
+    recorded = manifest.get("files", {}).get(summary.name, {}).get("sha256")
+    if recorded is not None and hashlib.sha256(summary.read_bytes()).hexdigest() != recorded:
+        raise RunsError(
+            f"{folder}: {summary.name} is not the file its run wrote (its SHA-256 is not the manifest's)"
+        )
     with open(summary, newline="") as f:
         rows = [
             {"predictor": ""}  # summaries made before --predictor have none

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -33,7 +34,9 @@ def edit_manifest(folder: Path, **options: object) -> None:
     path.write_text(json.dumps(manifest))
 
 
-def edit_summary(folder: Path, **values: object) -> None:
+def edit_summary(folder: Path, recorded: bool = True, **values: object) -> None:
+    """Change the summary's ``values``, as another run would have written it (``recorded``: with
+    its manifest's SHA-256 of it), or behind its run's back."""
     path = folder / "intersection.csv"
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
@@ -43,6 +46,17 @@ def edit_summary(folder: Path, **values: object) -> None:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+    if recorded:
+        manifest = json.loads((folder / "intersection.manifest.json").read_text())
+        manifest["files"]["intersection.csv"]["sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+        (folder / "intersection.manifest.json").write_text(json.dumps(manifest))
+
+
+def test_a_summary_changed_after_its_run_is_refused(tmp_path):
+    run = copy_run(tmp_path, RMPC)
+    edit_summary(run, recorded=False, goal_rate=0.99)
+    with pytest.raises(RunsError, match="intersection.csv is not the file its run wrote"):
+        gather([run])
 
 
 def test_three_committed_runs_make_one_frontier(tmp_path, capsys):
