@@ -134,9 +134,11 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
     for pred, points in curves.items():
         _, xs, ys = zip(*sorted(points), strict=True)
         ax.plot(xs, ys, ls=PREDICTOR_STYLE.get(family(pred), ":"), color=COLOURS["smpc"], lw=1, alpha=0.7)
-    for (x, y), budgets in tags.items():  # budgets on the same point share one label
+    # budgets on the same point share one label; labels of points in order of goal rate alternate
+    # above and below, so that two points close together do not write over each other
+    for i, ((x, y), budgets) in enumerate(sorted(tags.items(), key=lambda item: item[0][::-1])):
         text = "B=" + ", ".join(f"{b:g}" for b in sorted(set(budgets)))
-        ax.annotate(text, (x, y), textcoords="offset points", xytext=(6, 4), fontsize=8)
+        ax.annotate(text, (x, y), textcoords="offset points", xytext=(6, 4 if i % 2 else -11), fontsize=8)
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=True))
     ax.legend(unique.values(), unique.keys(), fontsize=8, loc="upper right")
