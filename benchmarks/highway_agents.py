@@ -279,7 +279,7 @@ def interval_model(switches: tuple[str, ...]) -> Any:
 
 def add_gate_options(parser: argparse.ArgumentParser) -> None:
     """``--signals`` and the junction gate's settings (:class:`risk_env.highway.gate_judge.GateSettings`)."""
-    from risk_env.highway.gate_judge import JUDGES, GateSettings
+    from risk_env.highway.gate_judge import JUDGES, MODE_JUDGES, GateSettings
 
     defaults = GateSettings()
     parser.add_argument(
@@ -332,7 +332,7 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--gate-keep-open",
-        choices=[j for j in JUDGES if j != "rollout"],
+        choices=MODE_JUDGES,
         default=defaults.keep_open,
         help="the judge by which an open gate closes again before the ego commits (default: the gate's own)",
     )

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import hashlib
 import json
 from pathlib import Path
@@ -29,7 +30,7 @@ from typing import Any
 
 from benchmarks import cli, highway_intersection
 from benchmarks.highway_frontier import publish, title, verdicts
-from benchmarks.highway_tables import RATES
+from benchmarks.highway_tables import RATES, rate_ci
 from benchmarks.sampled_rows import wilson
 
 FILES = ("frontier_runs.png", "frontier_runs.md", "frontier_runs.csv")
@@ -134,10 +135,16 @@ def with_intervals(row: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+@functools.cache
+def _intersection_parser() -> argparse.ArgumentParser:
+    """``highway_intersection``'s command line, for its defaults (built once)."""
+    return highway_intersection.build_parser()
+
+
 def world(manifest: dict[str, Any]) -> dict[str, Any]:
     """The :data:`WORLD` settings of a run (those its manifest lacks, or has as None, at the
     command's defaults: runs made before ``--duration`` drove highway-env's 13 s)."""
-    defaults = highway_intersection.build_parser()
+    defaults = _intersection_parser()
     options = manifest.get("options", {})
     values = {key: options.get(key) for key in WORLD}
     return {key: defaults.get_default(key) if value is None else value for key, value in values.items()}
@@ -173,15 +180,6 @@ def gather(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, An
     return manifests, list(kept.values())
 
 
-def _ci(s: dict[str, Any], key: str) -> str:
-    """A rate with its Wilson interval, or "n/a" where the run did not count it."""
-    parts = [s.get(f"{key}_{part}", "") for part in ("rate", "ci_low", "ci_high")]
-    if any(p == "" for p in parts):
-        return "n/a"
-    rate, low, high = (100 * float(p) for p in parts)
-    return f"{rate:.1f}% [{low:.1f}, {high:.1f}]"
-
-
 def _cell(s: dict[str, Any], key: str, form: str) -> str:
     """``s[key]`` formatted, "-" where it is NaN, "n/a" where the run did not count it."""
     value = s.get(key, "")
@@ -207,8 +205,8 @@ def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], comman
     for s in rows:
         who = s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "")
         lines.append(
-            f"| {who} | `{s['run']}` | {int(s['episodes'])} | {_ci(s, 'goal')} | {_ci(s, 'collision')} |"
-            f" {_ci(s, 'ego_into_vehicle')} | {_cell(s, 'deadlock', '.0f')} |"
+            f"| {who} | `{s['run']}` | {int(s['episodes'])} | {rate_ci(s, 'goal')} |"
+            f" {rate_ci(s, 'collision')} | {rate_ci(s, 'ego_into_vehicle')} | {_cell(s, 'deadlock', '.0f')} |"
             f" {_cell(s, 'time_to_goal_s', '.1f')} |"
         )
     lines.append(verdicts(rows))

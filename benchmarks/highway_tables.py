@@ -118,8 +118,14 @@ def _wrecks(s: dict[str, Any]) -> str:
     return "n/a" if s.get("wrecked") is None else f"{s['wrecked']} ({s['deadlock_wrecked']})"
 
 
-def _ci(s: dict[str, Any], key: str) -> str:
-    return f"{100 * s[f'{key}_rate']:.1f}% [{100 * s[f'{key}_ci_low']:.1f}, {100 * s[f'{key}_ci_high']:.1f}]"
+def rate_ci(s: dict[str, Any], key: str) -> str:
+    """The rate ``key`` of summary row ``s`` with its Wilson interval, in %; "n/a" where the row did
+    not count it (a summary made before the count existed)."""
+    parts = [s.get(f"{key}_{part}", "") for part in ("rate", "ci_low", "ci_high")]
+    if any(p == "" or p is None for p in parts):
+        return "n/a"
+    rate, low, high = (100 * float(p) for p in parts)
+    return f"{rate:.1f}% [{low:.1f}, {high:.1f}]"
 
 
 def _who(s: dict[str, Any]) -> str:
@@ -168,8 +174,8 @@ def markdown(summary: list[dict[str, Any]], args: argparse.Namespace, wall: floa
     ]
     for s in summary:
         lines.append(
-            f"| {_who(s)} | {s['episodes']} | {_ci(s, 'collision')} | {_ci(s, 'ego_into_vehicle')} |"
-            f" {_ci(s, 'vehicle_into_ego')} | {_ci(s, 'goal')} | {100 * s['timeout_rate']:.1f}% |"
+            f"| {_who(s)} | {s['episodes']} | {rate_ci(s, 'collision')} | {rate_ci(s, 'ego_into_vehicle')} |"
+            f" {rate_ci(s, 'vehicle_into_ego')} | {rate_ci(s, 'goal')} | {100 * s['timeout_rate']:.1f}% |"
             f" {s['deadlock']} | {s['jammed']} ({s['deadlock_jammed']}) | {_wrecks(s)} | {s['off_road']} |"
             f" {_f(s['time_to_goal_s'])} |"
         )

@@ -62,6 +62,7 @@ from risk_env.highway.gate_judge import (
     GATE_MARGIN,
     GATE_THRESHOLD,
     JUDGES,
+    MODE_JUDGES,
     GateSettings,
     check_gate,
     conflict_chance,
@@ -188,8 +189,7 @@ class JunctionGate:
         """The chance of a conflict the gate accepts (0: none, every counted mode)."""
         if self.judge == "rollout" and tolerance:
             raise GateError(f"the rollout judge accepts no chance of a conflict, got tolerance={tolerance!r}")
-        modes = tuple(j for j in JUDGES if j != "rollout")
-        self.keep_open = None if keep_open is None else checks.text("keep_open", keep_open, modes)
+        self.keep_open = None if keep_open is None else checks.text("keep_open", keep_open, MODE_JUDGES)
         """The judge by which an open gate closes again (None: :attr:`judge`; GateSettings.keep_open)."""
         if self.judge == "rollout" and keep_open is not None:
             raise GateError(

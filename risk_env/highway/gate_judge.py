@@ -63,6 +63,9 @@ SUBSTEPS = 4
 """Time samples per prediction step (positions linear in between)."""
 JUDGES = ("boxes", "footprint", "near", "stretch", "tracks", "rollout")
 """The gate's ways of judging a mode (module docstring)."""
+MODE_JUDGES = tuple(j for j in JUDGES if j != "rollout")
+"""The judges that judge each mode (all but ``"rollout"``, which rolls the scene out): those
+:attr:`GateSettings.keep_open` takes."""
 
 
 @dataclass(frozen=True)
@@ -101,7 +104,7 @@ class GateSettings:
     its corridor, so that the ego follows them and never passes beside
     (:func:`~risk_env.highway.lanes.follow.follow_leaders`)."""
     keep_open: str | None = None
-    """The judge (one of :data:`JUDGES` but ``"rollout"``) by which a gate that opened closes again
+    """The judge (one of :data:`MODE_JUDGES`) by which a gate that opened closes again
     before the ego commits (None: its own ``judge``): a gap once taken is given up only for a
     conflict that judge sees, so that a gate of boxes does not close for what is merely possible
     while the ego drives to its line."""
