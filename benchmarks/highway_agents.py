@@ -337,6 +337,11 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         help="the judge by which an open gate closes again before the ego commits (default: the gate's own)",
     )
     parser.add_argument(
+        "--gate-passage",
+        action="store_true",
+        help="the ego drives a passage the rollout verified, without the others' boxes (lane+interval)",
+    )
+    parser.add_argument(
         "--gate-approach-braking",
         type=cli.fraction,
         default=defaults.approach_braking,
@@ -362,4 +367,5 @@ def gate_settings(args: Any) -> Any:
         follow=getattr(args, "gate_follow", defaults.follow),
         approach_braking=getattr(args, "gate_approach_braking", defaults.approach_braking),
         keep_open=getattr(args, "gate_keep_open", defaults.keep_open),
+        passage=getattr(args, "gate_passage", defaults.passage),
     )

@@ -118,7 +118,7 @@ def standing_inside(base: Any, since: dict[int, float]) -> dict[int, float]:
     """For every vehicle other than the ego that stands inside the junction now (``base.time``), the
     time [s] since which it has at every step's end: its entry in ``since`` (the previous step's
     result), else now."""
-    from risk_env.highway.gate import JUNCTION_PREFIX
+    from risk_env.highway.route import JUNCTION_PREFIX
 
     now = float(base.time)
     return {

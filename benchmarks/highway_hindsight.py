@@ -29,9 +29,7 @@ import numpy as np
 
 from risk_env.highway.common import unwrapped_highway
 from risk_env.highway.idm import IDMEgo, put_ego, reached
-
-JUNCTION_PREFIX = "ir"
-"""A route lane to a node named so ends at highway-env's intersection entry (``o* -> ir*``)."""
+from risk_env.highway.route import JUNCTION_PREFIX  # a lane to such a node ends at the entry
 
 
 def scheduled_vehicle(

@@ -254,7 +254,19 @@ def parse_args(
     args.agents = [a.name for a in agents]
     if len(set(args.agents)) != len(args.agents):
         parser.error(f"argument --agents: an agent is named twice ({', '.join(args.agents)})")
+    check_rollout(parser, args)
     return args
+
+
+def check_rollout(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """A usage error when the gate rolls the scene out (``--gate-judge rollout``, ``--gate-passage``)
+    for an MPC planning with a predictor other than ``lane+interval`` (the rollout's)."""
+    flags = [("--gate-judge rollout", args.gate_judge == "rollout"), ("--gate-passage", args.gate_passage)]
+    used = [flag for flag, on in flags if on and args.gate]
+    planners = [a for a in args.agents if a not in REFERENCES]
+    other = [p for p in args.predictor if p != "lane+interval"]
+    if used and planners and other:
+        parser.error(f"argument {used[0]}: needs --predictor lane+interval (the rollout's), got {other[0]}")
 
 
 def check_duration(parser: argparse.ArgumentParser, duration: float, flag: str) -> None:

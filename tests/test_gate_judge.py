@@ -231,6 +231,8 @@ def test_the_commands_defaults_are_the_adapters():
         judge="footprint", tolerance=0.1, given_ego=True, keep_open="near"
     )
     assert gate_settings(highway_intersection.parse_args(["--no-gate"])) is False
+    args = highway_intersection.parse_args(["--predictor", "lane+interval", "--gate-passage"])
+    assert gate_settings(args) == GateSettings(passage=True)
     from benchmarks.highway_agents import make_driver, resolve
     from risk_env.highway import make_intersection_env
 

@@ -62,11 +62,13 @@ def test_the_ego_comes_through_an_open_junction_and_not_into_a_crossing_car(netw
     # a conflict with a route less likely than min_weight is none: its signal says it turns off
     turning = roll_out(predictor, near[None], plan, signals=[np.array([0.0, -1.0])])
     assert turning.through != verdict.through or "il3" not in turning.reason
-    # a horizon too short for the ego to reach its exit: not through, and said so
-    short = roll_out(predictor, far[None], plan, model=RolloutModel(horizon=2.0))
+    # a horizon too short for the ego to reach its exit: not through when it must be, and said so
+    short = roll_out(predictor, far[None], plan, model=RolloutModel(horizon=2.0, waits=False))
     assert not short.through and "cannot reach the last lane of its plan" in short.reason
-    short = roll_out(predictor, far[None], plan, model=RolloutModel(horizon=4.0))
+    short = roll_out(predictor, far[None], plan, model=RolloutModel(horizon=4.0, waits=False))
     assert not short.through and "short of its exit" in short.reason
+    for horizon in (2.0, 4.0):  # else through: the horizon, not the traffic, keeps it short
+        assert roll_out(predictor, far[None], plan, model=RolloutModel(horizon=horizon)).through
 
 
 def test_a_road_user_off_the_road_keeps_its_speed_and_heading(network):
@@ -132,8 +134,121 @@ def test_an_ego_that_goes_brakes_for_its_leader_when_told_to():
         ({"min_weight": 1.5}, "min_weight"),
         ({"target_floor": float("nan")}, "target_floor"),
         ({"samples": 0}, "samples"),
+        ({"standing": -0.5}, "standing"),
     ],
 )
 def test_bad_rollout_numbers_are_named(bad, match):
     with pytest.raises(ValueError, match=match):
         RolloutModel(**bad)
+
+
+def passage_gate(predictor, network, judge="stretch", passage=True):
+    """A gate on the ego's left turn that verifies its passage (``passage``), judging by ``judge``."""
+    path = RoutePath.from_lanes(network, LEFT_TURN)
+    gate = JunctionGate(predictor, 4.0, 3.0, 2.5, T, judge=judge, given_ego=True, passage=passage)
+    gate.route, gate.span, gate.speed_cap = path, junction_span(path), 8.0
+    return gate
+
+
+def test_a_verified_passage_caps_the_speed_at_the_runs_and_a_conflict_verifies_none(network):
+    predictor = predictor_at_the_line(network)
+    line = network.get_lane(LEFT_TURN[0]).length
+    far = measurement(network, ("o1", "ir1", 0), 20.0, 8.0)[None]
+    near = measurement(network, ("o1", "ir1", 0), 80.0, 8.0)[None]
+    verdict = roll_out(predictor, far, EgoPlan(LEFT_TURN, 3.0, 8.0))
+    # the ego stands at its line: one step at 3 m/s^2 in every run, nobody ahead of it
+    assert verdict.through and verdict.speed == pytest.approx(1.5)
+    assert roll_out(predictor, near, EgoPlan(LEFT_TURN, 3.0, 8.0)).speed == np.inf
+    gate = passage_gate(predictor, network, judge="rollout")
+    assert len(gate.step(line - 3.0, 0.0, far)) == 0 and gate.verified_speed == pytest.approx(1.5)
+    assert gate.allowed_speed(5.0) == pytest.approx(1.5) and gate.stop_speed() == pytest.approx(1.5)
+    assert len(gate.step(line - 3.0, 0.0, near)) == 1 and gate.verified_speed is None  # closed
+    # committed (past the line), the rollout still judges each step; a conflict verifies nothing
+    gate = passage_gate(predictor, network)
+    assert len(gate.step(line + 1.0, 3.0, far)) == 0 and gate.last.committed
+    assert gate.verified_speed == pytest.approx(1.5)
+    gate.step(line + 1.0, 3.0, near)
+    assert gate.verified_speed is None and gate.allowed_speed(5.0) == 5.0 and gate.stop_speed() == np.inf
+    # out of the gate's range, past the junction, or without the switch: nothing verified
+    s_in, s_out = gate.span
+    for progress in (s_in - 2.5 - 41.0, s_out + 2.6):
+        gate.step(progress, 3.0, far)
+        assert gate.verified_speed is None
+    gate = passage_gate(predictor, network, passage=False)
+    gate.step(line - 3.0, 0.0, far)
+    assert gate.verified_speed is None
+    with pytest.raises(GateError, match="verified passage needs the lane\\+interval predictor"):
+        JunctionGate(ConstantPredictor(Scenario.preset("low")), 4.0, 3.0, 2.5, T, passage=True)
+
+
+def test_the_adapter_hands_no_road_user_to_the_agent_on_a_verified_passage():
+    """Driving a few steps of seed 3 toward the junction: wherever the gate verified the passage the
+    agent gets no object and the passage's speed as its limit, elsewhere the road users as before."""
+    from risk_env import observation as layout
+    from risk_env.highway import IntersectionAdapter
+    from risk_env.highway.gate_judge import GateSettings
+
+    class Recorder:
+        def __init__(self, scenario, object_slots, predictor=None):
+            self.speed_limit, self.seen = np.inf, []
+
+        def predict(self, obs, episode_start=None, deterministic=True):
+            slots = np.asarray(obs)[layout.EGO_SIZE :].reshape(-1, layout.SLOT_SIZE)
+            self.seen.append((int(slots[:, 0].sum()), self.speed_limit))
+            return np.array([8.0, 0.0]), None
+
+    env = make_intersection_env()
+    settings = GateSettings(judge="rollout", given_ego=True, passage=True)
+    adapter = IntersectionAdapter(env, Recorder, slots=3, predictor="lane+interval", gate=settings)
+    obs, _ = env.reset(seed=3)
+    adapter.reset()
+    verified = []
+    for _ in range(8):
+        obs, _, terminated, truncated, _ = env.step(adapter.predict(obs)[0])
+        agent = adapter._agent_for(adapter.lane)
+        objects, limit = agent.seen[-1]
+        speed = adapter.gate.verified_speed
+        verified.append(speed is not None)
+        assert (
+            (objects == 0 and limit == speed)
+            if speed is not None
+            else (objects > 0 or adapter.gate.last.closed)
+        )
+        if terminated or truncated:
+            break
+    assert any(verified)
+
+
+def test_a_road_user_that_stands_may_stay_in_the_slow_run(network):
+    """A car standing 8 m into the ego's exit (waiting, or a wreck): the slow run keeps it there, so the
+    ego, which brakes behind it, is not through; a car taken to set off for the slow run's desired
+    speed (``standing=0``) leaves room in time."""
+    predictor = predictor_at_the_line(network)
+    plan = EgoPlan(LEFT_TURN, 3.0, 8.0)
+    car = measurement(network, LEFT_TURN[2], 8.0, 0.0)[None]
+    verdict = roll_out(predictor, car, plan)
+    assert (
+        not verdict.through
+        and verdict.reason.startswith("slow run")
+        and "short of its exit" in verdict.reason
+    )
+    assert roll_out(predictor, car, plan, model=RolloutModel(standing=0.0)).through
+    moving = measurement(network, LEFT_TURN[2], 8.0, 1.0)[None]  # above the threshold: it sets off
+    assert roll_out(predictor, moving, plan).through
+
+
+def test_an_ego_still_before_its_junction_at_the_horizons_end_is_through(network):
+    """45 m before its line at 8 m/s the ego cannot reach its exit within 8 s: with nobody about it is
+    through (it enters nothing it must clear), unless told to reach its exit (``waits=False``); a
+    crossing car it would meet within the horizon still stops it."""
+    lane = network.get_lane(LEFT_TURN[0])
+    ego = measurement(network, LEFT_TURN[0], lane.length - 45.0, 8.0)
+    intervals = IntervalModel(split_yield=True, centred=True)
+    predictor = LanePredictor(network, T, longitudinal="interval", intervals=intervals, ego=lambda: ego)
+    plan = EgoPlan(LEFT_TURN, 3.0, 8.0)
+    leaving = measurement(network, ("il2", "o2", 0), 30.0, 8.0)[None]
+    assert roll_out(predictor, leaving, plan).through
+    short = roll_out(predictor, leaving, plan, model=RolloutModel(waits=False))
+    assert not short.through and "short of its exit" in short.reason
+    near = roll_out(predictor, leaving, plan, model=RolloutModel(horizon=3.0))
+    assert near.through  # 3 s at 8 m/s: 24 m, still before the line

@@ -346,6 +346,12 @@ def _fails(module, argv: list[str], flag: str, message: str = "") -> None:
         (["--predictor", "lane,lane"], "--predictor", "named twice"),
         (["--agents", "smpc,smpc:budget=0.05"], "--agents", "named twice"),
         (["--tolerance", "0.01"], "--tolerance", "smpc:probability:0.01"),
+        (["--gate-passage"], "--gate-passage", "needs --predictor lane+interval"),
+        (
+            ["--gate-judge", "rollout", "--predictor", "lane+interval,constant"],
+            "--gate-judge",
+            "got constant",
+        ),
     ],
 )
 @pytest.mark.parametrize("module", [highway_intersection, highway_frontier], ids=["intersection", "frontier"])

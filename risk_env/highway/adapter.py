@@ -261,7 +261,8 @@ class IntersectionAdapter:
         if self._leader_route is not None:  # the gate's follow: road users ahead are followed
             corridor = scenario.path.corridor
             self._agent_predictor.leaders = Leaders(self._leader_route, (x, y), corridor)
-        self.last_objects = others[nearest[: self.slots - len(virtual)]]
+        verified = self.gate is not None and self.gate.verified_speed is not None
+        self.last_objects = others[nearest[: 0 if verified else self.slots - len(virtual)]]
         pose = np.array([x, y, theta])
         error, lam = path_error_vector(scenario.path, pose, speed, scenario.ego.v_ref)
         planned = np.vstack([virtual, self.last_objects])

@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -63,6 +62,7 @@ from risk_env.highway.gate_judge import (
     GATE_THRESHOLD,
     JUDGES,
     MODE_JUDGES,
+    GateDecision,
     GateSettings,
     check_gate,
     conflict_chance,
@@ -71,7 +71,7 @@ from risk_env.highway.gate_judge import (
 )
 from risk_env.highway.lane_agents import lane_scenario
 from risk_env.highway.lanes.predictor import EgoPlan, LanePredictor
-from risk_env.highway.lanes.rollout import roll_out
+from risk_env.highway.lanes.rollout import Rollout, roll_out
 from risk_env.highway.predictors import (
     MATCH,
     SIGNAL_MATCH,
@@ -82,13 +82,14 @@ from risk_env.highway.predictors import (
     is_virtual,
     standing,
 )
-from risk_env.highway.route import RoutePath
+from risk_env.highway.route import JUNCTION_PREFIX, RoutePath, junction_span
 from risk_env.prediction.mixture import Mixture
 from risk_env.prediction.predictors import ConstantPredictor, Predictor
 from risk_env.scenario.scenario import Scenario
 
 __all__ = [
     "HOLD_GAP",
+    "JUNCTION_PREFIX",
     "LINE_BUFFER",
     "MATCH",
     "SIGNAL_MATCH",
@@ -106,8 +107,6 @@ __all__ = [
     "travel_time",
 ]
 
-JUNCTION_PREFIX = "ir"
-"""A route lane from a node named so lies inside highway-env's intersection (``ir*`` -> ``il*``)."""
 GATE_STEPS = 20
 """Most prediction steps the gate looks ahead (10 s at T = 0.5 s)."""
 GATE_RANGE = 40.0
@@ -117,31 +116,6 @@ LINE_BUFFER = 1.5
 highway-env's car lags it)."""
 HOLD_GAP = 0.5
 """Gap [m] between the ego's disc and the virtual object when it holds an ego past the line."""
-
-
-def junction_span(route: RoutePath) -> tuple[float, float] | None:
-    """Route arc lengths ``(s_in, s_out)`` [m] of the route's first run of junction lanes (from an
-    ``ir*`` node), or None when it crosses no junction."""
-    inside = [lane[0].startswith(JUNCTION_PREFIX) for lane in route.lanes]
-    if not any(inside):
-        return None
-    first = inside.index(True)
-    last = first
-    while last + 1 < len(inside) and inside[last + 1]:
-        last += 1
-    return float(route.offsets[first]), float(route.offsets[last] + route.lengths[last])
-
-
-@dataclass
-class GateDecision:
-    """One step's verdict."""
-
-    closed: bool
-    """Whether the ego must wait at the stop line (the MPC gets the virtual object)."""
-    committed: bool
-    """Whether the ego is past the point where it can stop before the junction."""
-    slack: float = math.inf
-    r"""$\min_j (t^o_j - t^e_j)$ [s] over the zone (inf: not judged or nobody comes)."""
 
 
 class JunctionGate:
@@ -167,6 +141,7 @@ class JunctionGate:
         hard_stop: bool = False,
         approach_braking: float = 0.5,
         keep_open: str | None = None,
+        passage: bool = False,
     ) -> None:
         for name, value in (("reach", reach), ("accel", accel), ("half_length", half_length), ("dt", dt)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -195,6 +170,13 @@ class JunctionGate:
             raise GateError(
                 f"the rollout judge judges no mode to keep a gate open, got keep_open={keep_open!r}"
             )
+        self.passage = bool(passage)
+        """Whether the ego drives a passage the rollout verified (:attr:`GateSettings.passage`)."""
+        if self.passage and not (isinstance(predictor, LanePredictor) and predictor.ego):
+            raise GateError("the verified passage needs the lane+interval predictor with an ego")
+        self.verified_speed: float | None = None
+        """This step's speed cap [m/s] of the passage the rollout verified, or None (not verified)."""
+        self._rolled: Rollout | None = None
         self.given_ego = bool(given_ego)
         """Whether the others are predicted given that the ego goes (:meth:`_predict`)."""
         self.slow_approach = bool(slow_approach)
@@ -237,7 +219,7 @@ class JunctionGate:
         """The verdict for the ego at route arc length ``progress`` [m] and ``speed`` [m/s], the
         other vehicles measured as ``others (m, 5)``, with their observed turn signals (``signals``,
         one ``(2,)`` or None each, for the lane predictor) if any."""
-        self._was_closed = self.last.closed
+        self._was_closed, self._rolled = self.last.closed, None
         if self.span is None or self.committed:
             self.last = GateDecision(False, True)
             return self.last
@@ -255,7 +237,8 @@ class JunctionGate:
             self.last, self._taken = GateDecision(False, False), False
             return self.last
         if self.judge == "rollout":  # the scene rolled out with the ego going (lanes.rollout)
-            through = roll_out(self.predictor, np.asarray(others, dtype=float), self._plan(), signals).through
+            self._rolled = roll_out(self.predictor, np.asarray(others, dtype=float), self._plan(), signals)
+            through = self._rolled.through
             self.closed_steps += not through
             self.last = GateDecision(not through, False, math.inf if through else -math.inf)
             return self.last
@@ -302,12 +285,26 @@ class JunctionGate:
         object when closed; the agents' :class:`GatePredictor` (:attr:`wrapper`) is told which, and
         the observed turn signals ``signals`` of ``others`` (or None)."""
         virtual = self.virtual() if self.decide(progress, speed, others, signals).closed else None
+        self.verified_speed = None if virtual is not None else self._verify(progress, others, signals)
         if self.wrapper is not None:
             self.wrapper.virtual = virtual
             self.wrapper.signals = None if signals is None else (np.asarray(others, dtype=float), signals)
             going = self.given_ego and virtual is None and self.route is not None
             self.wrapper.ego_plan = self._plan() if going else None
         return np.zeros((0, 5)) if virtual is None else virtual[None]
+
+    def _verify(self, progress: float, others: np.ndarray, signals: list | None) -> float | None:
+        """With :attr:`passage`, from the gate's range until the ego's rear leaves the junction: the
+        runs' lowest speed one step on where the rollout has the ego come through, else None."""
+        if not self.passage or self.span is None or not len(others):
+            return None
+        s_in, s_out = self.span
+        if progress > s_out + self.half_length or s_in - self.half_length - progress > GATE_RANGE:
+            return None
+        verdict = self._rolled or roll_out(
+            self.predictor, np.asarray(others, dtype=float), self._plan(), signals
+        )
+        return max(verdict.speed, 0.0) if verdict.through else None  # the IDM's braking may overshoot
 
     def _line(self) -> float:
         """Route arc length [m] of the virtual object."""
@@ -332,7 +329,9 @@ class JunctionGate:
         ego's largest braking (:attr:`approach_braking`) stops it where its disc meets the virtual
         object, $\sqrt{a d}$ ($d$ [m] the distance left; 0 past it); else inf. The MPC's horizon has
         no terminal row: without the cap it comes on at its reference speed until it can no longer
-        stop before the line."""
+        stop before the line. On a verified passage: :attr:`verified_speed`."""
+        if self.verified_speed is not None:
+            return self.verified_speed
         if not (self.slow_approach and self.last.closed):
             return math.inf
         return self._line_speed()
@@ -341,7 +340,10 @@ class JunctionGate:
         r"""The speed [m/s] to apply for the agent's ``v``: with :attr:`hard_stop` and the gate closed, at
         most $\sqrt{a d}$ (as :meth:`stop_speed`), so that whatever the agent chose (a soft plan that
         trades the virtual object's risk for another's, a fallback manoeuvre ranked by all objects
-        alike) the ego stops where its disc meets the virtual object; else ``v``."""
+        alike) the ego stops where its disc meets the virtual object; on a verified passage at most
+        :attr:`verified_speed`; else ``v``."""
+        if self.verified_speed is not None:
+            return min(v, self.verified_speed)
         if not (self.hard_stop and self.last.closed):
             return v
         return min(v, self._line_speed())

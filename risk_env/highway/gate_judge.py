@@ -68,6 +68,18 @@ MODE_JUDGES = tuple(j for j in JUDGES if j != "rollout")
 :attr:`GateSettings.keep_open` takes."""
 
 
+@dataclass
+class GateDecision:
+    """One step's verdict."""
+
+    closed: bool
+    """Whether the ego must wait at the stop line (the MPC gets the virtual object)."""
+    committed: bool
+    """Whether the ego is past the point where it can stop before the junction."""
+    slack: float = math.inf
+    r"""$\min_j (t^o_j - t^e_j)$ [s] over the zone (inf: not judged or nobody comes)."""
+
+
 @dataclass(frozen=True)
 class GateSettings:
     """How the junction gate judges (``IntersectionAdapter(gate=GateSettings(...))``; ``gate=True``
@@ -108,6 +120,13 @@ class GateSettings:
     before the ego commits (None: its own ``judge``): a gap once taken is given up only for a
     conflict that judge sees, so that a gate of boxes does not close for what is merely possible
     while the ego drives to its line."""
+    passage: bool = False
+    """Whether the ego drives a passage the rollout verified (the lane+interval predictor with an
+    ego): while the gate is open, from the gate's range until the ego's rear leaves the junction,
+    each step rolls the scene out with the ego going on (:func:`~risk_env.highway.lanes.rollout.roll_out`);
+    where it comes through in every run, the agents plan without the other road users, at no more
+    than the runs' lowest speed one step on (:attr:`~risk_env.highway.gate.JunctionGate.verified_speed`),
+    and else keep off every box as without it."""
 
 
 def check_gate(gate: Any) -> GateSettings | None:

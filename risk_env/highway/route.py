@@ -107,3 +107,20 @@ class RoutePath:
         """The whole route sampled every ``spacing`` metres ``(M, 2)`` [m]."""
         total = float(np.sum(self.lengths))
         return self.position(np.linspace(0.0, total, max(int(total / spacing), 1) + 1))
+
+
+JUNCTION_PREFIX = "ir"
+"""A route lane from a node named so lies inside highway-env's intersection (``ir*`` -> ``il*``)."""
+
+
+def junction_span(route: RoutePath) -> tuple[float, float] | None:
+    """Route arc lengths ``(s_in, s_out)`` [m] of the route's first run of junction lanes (from an
+    ``ir*`` node), or None when it crosses no junction."""
+    inside = [lane[0].startswith(JUNCTION_PREFIX) for lane in route.lanes]
+    if not any(inside):
+        return None
+    first = inside.index(True)
+    last = first
+    while last + 1 < len(inside) and inside[last + 1]:
+        last += 1
+    return float(route.offsets[first]), float(route.offsets[last] + route.lengths[last])

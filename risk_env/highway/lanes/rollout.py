@@ -8,8 +8,8 @@ now at its acceleration up to its speed, never yielding, and braking for its lea
 highway-env's IDM does (what the MPC does with a car ahead in its lane); the others brake for it
 and yield to it as highway-env's traffic does. Three runs span the IDM's unknown numbers: the
 exponent at the bottom of the interval prediction's range with a desired speed of at least
-:attr:`RolloutModel.target_floor`, the speed model's own numbers, and the exponent at the top
-with the lane's limit as desired speed.
+:attr:`RolloutModel.target_floor` (none for a road user that stands: it may stay, as a wreck does),
+the speed model's own numbers, and the exponent at the top with the lane's limit as desired speed.
 
 The ego **comes through** when, in every run, its centre gets :attr:`RolloutModel.past` metres
 into the last lane of its plan within :attr:`RolloutModel.horizon`, and until then its body
@@ -59,9 +59,17 @@ class RolloutModel:
     the vehicle brakes, not that it wants to crawl."""
     samples: int = 8
     """Positions tested per step."""
+    waits: bool = True
+    """Whether an ego that could not reach its exit within the horizon even on a free road (from 40 m
+    out at 8 m/s it cannot) is through when nothing met it: the horizon, not the traffic, keeps it
+    short, and each step judges again before the ego commits. Else it must always reach its exit."""
+    standing: float = 0.5
+    """A road user slower than this [m/s] stays where it is in the slow run (a car waiting for a
+    gap, or a wreck, which highway-env leaves where it crashed), instead of setting off for
+    :attr:`target_floor`."""
 
     def __post_init__(self) -> None:
-        for name in ("horizon", "past", "clearance", "min_weight", "target_floor"):
+        for name in ("horizon", "past", "clearance", "min_weight", "target_floor", "standing"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"RolloutModel.{name} must be a finite number >= 0, got {value!r}")
@@ -81,6 +89,17 @@ class Rollout:
     reason: str = ""
     """Empty when through; else the first run that failed and how (the ego short of its exit, or
     the road user it met, its route and the time)."""
+    speed: float = math.inf
+    """When through: the ego's lowest speed [m/s] one step on, over the runs (the first input the runs'
+    plans share; it brakes there only for its leader); else inf."""
+
+
+def free_reach(v: float, plan: EgoPlan, horizon: float) -> float:
+    """How far [m] the ego gets in ``horizon`` [s] from speed ``v`` [m/s] on a free road: at
+    ``plan.accel`` up to ``plan.speed`` (from above it, at ``plan.speed``)."""
+    v = min(max(v, 0.0), plan.speed)
+    t = min((plan.speed - v) / plan.accel, horizon)
+    return v * t + 0.5 * plan.accel * t**2 + plan.speed * (horizon - t)
 
 
 def roll_out(
@@ -104,13 +123,19 @@ def roll_out(
         return Rollout(False, "the ego is off the road or off its plan")
     agents, ego = scene.agents, int(egos[0])
     route = agents.routes[ego]
-    if tuple(plan.lanes[-1]) not in route.lanes:
+    if tuple(plan.lanes[-1]) in route.lanes:
+        goal = float(route.offsets[route.lanes.index(tuple(plan.lanes[-1]))]) + model.past
+    elif model.waits:  # the prediction's routes end where it can reach: the horizon keeps it short
+        goal = math.inf
+    else:
         return Rollout(False, "the ego cannot reach the last lane of its plan within the horizon")
-    goal = float(route.offsets[route.lanes.index(tuple(plan.lanes[-1]))]) + model.past
+    free = free_reach(float(agents.v[ego]), plan, steps * dt)
     count = len(agents.vehicle)
     low, high = (float(x) for x in predictor.intervals.delta)
+    stays = (np.abs(agents.v) < model.standing) & ~scene.is_ego
+    slow_target = np.where(stays, 0.0, np.maximum(agents.v, model.target_floor))
     options = {
-        "slow": {"delta": np.full(count, low), "target": np.maximum(agents.v, model.target_floor)},
+        "slow": {"delta": np.full(count, low), "target": slow_target},
         "mean": {},
         "fast": {"delta": np.full(count, high), "target": np.full(count, np.inf)},
     }
@@ -123,8 +148,9 @@ def roll_out(
     others = np.flatnonzero(~scene.is_ego & (agents.weight >= model.min_weight))
     stray = [i for i, hyp in enumerate(scene.hypotheses[: scene.users]) if hyp is None]
     length, width = traffic.vehicle_length + 2 * model.clearance, traffic.vehicle_width + 2 * model.clearance
+    speed = math.inf
     for run in RUNS:
-        s, _ = predictor.speed_model.run(
+        s, v = predictor.speed_model.run(
             agents,
             steps,
             dt,
@@ -135,10 +161,11 @@ def roll_out(
             **options[run],
         )
         along = s[:, low] * (1.0 - frac) + s[:, low + 1] * frac  # (A, T): linear between steps
+        speed = min(speed, float(v[ego, 1]))
         arrived = np.flatnonzero(along[ego] >= goal)
-        if not len(arrived):
+        if not len(arrived) and not (model.waits and goal - s[ego, 0] > free):
             return Rollout(False, f"{run} run: the ego is {goal - s[ego, -1]:.1f} m short of its exit")
-        until = tau[: arrived[0] + 1]
+        until = tau[: arrived[0] + 1] if len(arrived) else tau
         pose = interpolate(samples, along[:, : len(until)])  # (A, T, 3)
         normal = np.stack([-np.sin(pose[..., 2]), np.cos(pose[..., 2])], axis=-1)
         points = pose[..., :2] + (agents.r[:, None] * fade[None, : len(until)])[..., None] * normal
@@ -158,4 +185,4 @@ def roll_out(
             )
             if hit.any():
                 return Rollout(False, f"{run} run: {name} at {float(until[near[np.argmax(hit)]]) * dt:.2f} s")
-    return Rollout(True)
+    return Rollout(True, speed=speed)
