@@ -12,7 +12,8 @@ exponent at the bottom of the interval prediction's range with a desired speed o
 the speed model's own numbers, and the exponent at the top with the lane's limit as desired speed.
 
 The ego **comes through** when, in every run, its centre gets :attr:`RolloutModel.past` metres
-into the last lane of its plan within :attr:`RolloutModel.horizon`, and until then its body
+into the last lane of its plan within :attr:`RolloutModel.horizon` (unless even a free road would
+not take it there: :attr:`RolloutModel.waits`), and until then its body
 (highway-env's car widened by :attr:`RolloutModel.clearance` on each side) meets no route
 hypothesis of weight at least :attr:`RolloutModel.min_weight` (highway-env's rectangle test,
 :func:`~risk_env.highway.lanes.routes.rectangles_intersect`, on the positions between steps), nor
