@@ -75,12 +75,21 @@ def beats(s: dict[str, Any], idm: dict[str, Any]) -> bool:
     return s["goal_rate"] >= idm["goal_rate"] and s["collision_rate"] < idm["collision_rate"]
 
 
+def who(s: dict[str, Any]) -> str:
+    """A summary row's agent, with its predictor and its run's ``variant`` label if any."""
+    variant = s.get("variant", "")
+    return (
+        s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "") + (f" [{variant}]" if variant else "")
+    )
+
+
 def _style(s: dict[str, Any]) -> tuple[str, str, float | None]:
     """The legend label, the marker and the budget B (None: not an SMPC on a budget alone) of a
     summary row."""
     agent = parse_agent(s["agent"], KINDS)
     pred = s["predictor"]
     note = f" ({PREDICTOR_NAMES.get(pred, pred)} predictor)" if pred else ""
+    note += f" [{s['variant']}]" if s.get("variant") else ""
     if agent.kind == "idm":
         return "IDM (highway-env)", "*", None
     if agent.kind == "hindsight":
@@ -117,7 +126,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
         colour = COLOURS[kind]
         ax.errorbar(x, y, xerr=[[x_lo], [x_hi]], yerr=[[y_lo], [y_hi]], fmt="none", ecolor=colour, alpha=0.35)
         if budget is not None:
-            curves.setdefault(s["predictor"], []).append((budget, x, y))
+            curves.setdefault((s["predictor"], s.get("variant", "")), []).append((budget, x, y))
             tags.setdefault((round(x, 6), round(y, 6)), []).append(budget)
         ax.plot(
             x,
@@ -129,9 +138,10 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             fillstyle=PREDICTOR_FILL.get(family(s["predictor"]), "left") if s["predictor"] else "full",
             markerfacecoloralt="white",
             mew=1.6,
+            mec="black" if s.get("variant") else colour,  # a labelled run's agent: edged
             label=label,
         )
-    for pred, points in curves.items():
+    for (pred, _), points in curves.items():
         _, xs, ys = zip(*sorted(points), strict=True)
         ax.plot(xs, ys, ls=PREDICTOR_STYLE.get(family(pred), ":"), color=COLOURS["smpc"], lw=1, alpha=0.7)
     # budgets on the same point share one label; labels of points in order of goal rate alternate
@@ -166,8 +176,7 @@ def verdicts(summary: list[dict[str, Any]]) -> str:
     ]
     for s in summary:
         if s is not idm:
-            who = s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "")
-            lines.append(f"- `{who}`: {'yes' if beats(s, idm) else 'no'}")
+            lines.append(f"- `{who(s)}`: {'yes' if beats(s, idm) else 'no'}")
     return "\n".join(lines) + "\n"
 
 

@@ -12,7 +12,8 @@ own options (the RMPC's, each SMPC budget's, the IDM's) are set side by side wit
 again. Points are comparable only on the same episodes: every run must have driven the same
 environment, seeds, duration, spawn probability and initial vehicles (else an error naming the
 setting and the runs); an agent (with its predictor) found in two runs is drawn once if its outcomes
-agree there (the IDM beside each planner), and is an error if they do not. Outputs in
+agree there (the IDM beside each planner), and is an error if they do not, unless a label
+(``--runs DIR=LABEL``) tells the runs' agents apart (the RMPC with and without an option). Outputs in
 ``--out``: ``frontier_runs.png``, ``frontier_runs.md`` (the table, which agents beat the IDM, and
 each run's command and commit) and ``frontier_runs.csv`` (the runs' summary rows, each with its
 folder).
@@ -29,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import cli, highway_intersection
-from benchmarks.highway_frontier import publish, title, verdicts
+from benchmarks.highway_frontier import publish, title, verdicts, who
 from benchmarks.highway_tables import RATES, rate_ci
 from benchmarks.sampled_rows import wilson
 
@@ -49,7 +50,7 @@ SAME = (
 )
 """The outcomes by which an agent found in two runs is the same agent (drawn once), or not (an error):
 those that both runs counted."""
-TEXT_FIELDS = frozenset({"agent", "predictor", "label", "run"})
+TEXT_FIELDS = frozenset({"agent", "predictor", "label", "run", "variant"})
 """Summary columns kept as text (the others are numbers, or empty)."""
 
 
@@ -57,12 +58,15 @@ class RunsError(ValueError):
     """Runs that cannot be drawn together (the message names the setting and the folders)."""
 
 
-def existing_folder(text: str) -> Path:
-    """``type=`` of a folder that exists."""
-    path = Path(text)
-    if not text or not path.is_dir():
-        raise argparse.ArgumentTypeError(f"not a folder: {text!r}")
-    return path
+def run_folder(text: str) -> tuple[Path, str]:
+    """``type=`` of ``DIR`` or ``DIR=LABEL``: a folder that exists and the label of its agents
+    ("" for none)."""
+    folder, _, label = text.partition("=")
+    if "=" in text and not label.strip():
+        raise argparse.ArgumentTypeError(f"an empty label after '=': {text!r}")
+    if not folder or not Path(folder).is_dir():
+        raise argparse.ArgumentTypeError(f"not a folder: {folder!r}")
+    return Path(folder), label.strip()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -70,11 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser = cli.parser("highway_frontier_runs", __doc__)
     parser.add_argument(
         "--runs",
-        type=existing_folder,
-        metavar="DIR",
+        type=run_folder,
+        metavar="DIR[=LABEL]",
         nargs="+",
         required=True,
-        help="run folders of highway_intersection or highway_frontier (default: none, required)",
+        help="run folders of highway_intersection or highway_frontier, each with an optional label that"
+        " tells its agents from the same agents of other runs (default: none, required)",
     )
     cli.add_output_options(
         parser, Path("results/highway/frontier_runs"), "folder for the figure, the table and the CSV"
@@ -150,16 +155,19 @@ def world(manifest: dict[str, Any]) -> dict[str, Any]:
     return {key: defaults.get_default(key) if value is None else value for key, value in values.items()}
 
 
-def gather(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """The manifests and the summary rows of ``folders``, checked to share their episodes and to
-    name every agent (with its predictor) once (raises :class:`RunsError`)."""
+def gather(runs: list[Path | tuple[Path, str]]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The manifests and the summary rows of ``runs`` (folders, or ``(folder, label)``: the label is
+    each of its rows' ``variant``), checked to share their episodes and to name every agent (with its
+    predictor and label) once (raises :class:`RunsError`)."""
+    labelled = [(run, "") if isinstance(run, Path) else (Path(run[0]), run[1]) for run in runs]
+    folders = [folder for folder, _ in labelled]
     if len({p.resolve() for p in folders}) != len(folders):
         raise RunsError(f"a folder is named twice: {' '.join(map(str, folders))}")
     manifests, rows = [], []
-    for folder in folders:
+    for folder, label in labelled:
         manifest, summary = read_run(folder)
-        manifests.append(manifest | {"folder": str(folder)})
-        rows += summary
+        manifests.append(manifest | {"folder": str(folder), "variant": label})
+        rows += [row | {"variant": label} for row in summary]
     first = world(manifests[0])
     for manifest in manifests[1:]:
         other = world(manifest)
@@ -169,14 +177,17 @@ def gather(folders: list[Path]) -> tuple[list[dict[str, Any]], list[dict[str, An
                     f"the runs drove other episodes: {key} {first[key]!r} in {manifests[0]['folder']},"
                     f" {other[key]!r} in {manifest['folder']}"
                 )
-    kept: dict[tuple[str, str], dict[str, Any]] = {}
+    kept: dict[tuple[str, str, str], dict[str, Any]] = {}
     for row in rows:
-        key = (row["agent"], row["predictor"])
+        key = (row["agent"], row["predictor"], row["variant"])
         if key not in kept:
             kept[key] = row
         elif any(row[k] != kept[key][k] for k in SAME if k in row and k in kept[key]):
-            who = f"{key[0]} ({key[1] or 'no predictor'})"
-            raise RunsError(f"{who} differs in two runs: {kept[key]['run']} and {row['run']}")
+            who = f"{key[0]} ({key[1] or 'no predictor'})" + (f" [{key[2]}]" if key[2] else "")
+            raise RunsError(
+                f"{who} differs in two runs: {kept[key]['run']} and {row['run']} (a label, DIR=LABEL,"
+                " tells them apart)"
+            )
     return manifests, list(kept.values())
 
 
@@ -203,9 +214,8 @@ def markdown(manifests: list[dict[str, Any]], rows: list[dict[str, Any]], comman
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for s in rows:
-        who = s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "")
         lines.append(
-            f"| {who} | `{s['run']}` | {int(s['episodes'])} | {rate_ci(s, 'goal')} |"
+            f"| {who(s)} | `{s['run']}` | {int(s['episodes'])} | {rate_ci(s, 'goal')} |"
             f" {rate_ci(s, 'collision')} | {rate_ci(s, 'ego_into_vehicle')} | {_cell(s, 'deadlock', '.0f')} |"
             f" {_cell(s, 'time_to_goal_s', '.1f')} |"
         )
@@ -218,7 +228,8 @@ def provenance(manifests: list[dict[str, Any]]) -> str:
     lines = ["The runs:", ""]
     for m in manifests:
         commit = (m.get("git_commit") or "")[:7] or "unknown code"
-        lines.append(f"- `{m['folder']}` (run on {commit}): `{m['command']}`")
+        label = f" [{m['variant']}]" if m.get("variant") else ""
+        lines.append(f"- `{m['folder']}`{label} (run on {commit}): `{m['command']}`")
     return "\n".join(lines) + "\n"
 
 

@@ -163,3 +163,31 @@ def test_runs_made_before_the_predictor_and_the_goals_interval_still_compose(tmp
 def _summary(folder: Path) -> list[dict[str, str]]:
     with open(folder / "intersection.csv", newline="") as f:
         return list(csv.DictReader(f))
+
+
+def test_a_label_draws_the_same_agent_of_two_runs_side_by_side(tmp_path, capsys):
+    """Two runs of one agent with other options (here: other outcomes) are refused unlabelled, and
+    drawn as two agents when one run is labelled (DIR=LABEL), the label in the table, the verdicts
+    and the provenance."""
+    first, second, idm = copy_run(tmp_path, RMPC), tmp_path / "second", copy_run(tmp_path, IDM)
+    shutil.copytree(first, second)
+    edit_summary(second, goal_rate=0.9, goal_ci_low=0.85, goal_ci_high=0.94)
+    with pytest.raises(RunsError, match="a label, DIR=LABEL, tells them apart"):
+        gather([first, second])
+    _, rows = gather([first, (second, "passage"), idm])
+    assert [(r["agent"], r["variant"]) for r in rows] == [
+        ("rmpc:worst_case", ""),
+        ("rmpc:worst_case", "passage"),
+        ("idm", ""),
+    ]
+    out = tmp_path / "out"
+    highway_frontier_runs.main(["--runs", str(first), f"{second}=passage", str(idm), "--out", str(out)])
+    text = (out / "frontier_runs.md").read_text()
+    assert "| rmpc:worst_case (lane+interval) [passage] |" in text
+    assert "- `rmpc:worst_case (lane+interval) [passage]`: yes" in text  # 90 % goals, fewer collisions
+    assert f"- `{second}` [passage] (run on" in text
+    for bad, message in ((f"{second}=", "an empty label"), (f"{tmp_path / 'none'}=x", "not a folder")):
+        with pytest.raises(SystemExit):
+            highway_frontier_runs.main(["--runs", bad, "--out", str(tmp_path / "bad")])
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
