@@ -156,6 +156,7 @@ SMALLEST = {
     "highway_intersection": {"--episodes": "1", "--workers": "1"},
     "highway_frontier": {"--episodes": "1", "--workers": "1"},
     "highway_frontier_runs": {},
+    "highway_gate": {"--episodes": "1", "--duration": "1", "--workers": "1"},
     "highway_render": {"--max-steps": "2"},
     "prediction": {"--episodes": "1", "--duration": "1", "--workers": "1"},
     "train_ppo": {
@@ -171,6 +172,13 @@ SMALLEST = {
     "rollout": {},
 }
 """The smallest episode count (and work) of each command, set on every example."""
+
+
+def test_every_command_has_its_smallest_work():
+    """The slow example runs need each command's entry in :data:`SMALLEST`: checked in the default run."""
+    assert set(SMALLEST) == set(COMMANDS)
+
+
 FAST = {
     "python -m benchmarks.env_speed --repeat 10 --out docs/results",
     "python -m benchmarks.vector_speed --num-envs 1,8,64 --modes vector_entry_point,sync,async",
