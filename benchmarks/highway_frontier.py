@@ -75,12 +75,14 @@ def beats(s: dict[str, Any], idm: dict[str, Any]) -> bool:
     return s["goal_rate"] >= idm["goal_rate"] and s["collision_rate"] < idm["collision_rate"]
 
 
+def variant_tag(label: str) -> str:
+    """A run's label as it follows its agents' names (" [LABEL]"; "" for none)."""
+    return f" [{label}]" if label else ""
+
+
 def who(s: dict[str, Any]) -> str:
     """A summary row's agent, with its predictor and its run's ``variant`` label if any."""
-    variant = s.get("variant", "")
-    return (
-        s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "") + (f" [{variant}]" if variant else "")
-    )
+    return s["agent"] + (f" ({s['predictor']})" if s["predictor"] else "") + variant_tag(s.get("variant", ""))
 
 
 def _style(s: dict[str, Any]) -> tuple[str, str, float | None]:
@@ -89,7 +91,7 @@ def _style(s: dict[str, Any]) -> tuple[str, str, float | None]:
     agent = parse_agent(s["agent"], KINDS)
     pred = s["predictor"]
     note = f" ({PREDICTOR_NAMES.get(pred, pred)} predictor)" if pred else ""
-    note += f" [{s['variant']}]" if s.get("variant") else ""
+    note += variant_tag(s.get("variant", ""))
     if agent.kind == "idm":
         return "IDM (highway-env)", "*", None
     if agent.kind == "hindsight":

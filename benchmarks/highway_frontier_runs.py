@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks import cli, highway_intersection
-from benchmarks.highway_frontier import publish, title, verdicts, who
+from benchmarks.highway_frontier import publish, title, variant_tag, verdicts, who
 from benchmarks.highway_tables import RATES, rate_ci
 from benchmarks.sampled_rows import wilson
 
@@ -183,7 +183,7 @@ def gather(runs: list[Path | tuple[Path, str]]) -> tuple[list[dict[str, Any]], l
         if key not in kept:
             kept[key] = row
         elif any(row[k] != kept[key][k] for k in SAME if k in row and k in kept[key]):
-            who = f"{key[0]} ({key[1] or 'no predictor'})" + (f" [{key[2]}]" if key[2] else "")
+            who = f"{key[0]} ({key[1] or 'no predictor'})" + variant_tag(key[2])
             raise RunsError(
                 f"{who} differs in two runs: {kept[key]['run']} and {row['run']} (a label, DIR=LABEL,"
                 " tells them apart)"
@@ -228,8 +228,9 @@ def provenance(manifests: list[dict[str, Any]]) -> str:
     lines = ["The runs:", ""]
     for m in manifests:
         commit = (m.get("git_commit") or "")[:7] or "unknown code"
-        label = f" [{m['variant']}]" if m.get("variant") else ""
-        lines.append(f"- `{m['folder']}`{label} (run on {commit}): `{m['command']}`")
+        lines.append(
+            f"- `{m['folder']}`{variant_tag(m.get('variant', ''))} (run on {commit}): `{m['command']}`"
+        )
     return "\n".join(lines) + "\n"
 
 

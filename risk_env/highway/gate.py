@@ -156,8 +156,11 @@ class JunctionGate:
         self.margin, self.threshold = float(margin), float(threshold)
         self.judge = checks.text("judge", judge, JUDGES)
         """How a mode is judged (:mod:`~risk_env.highway.gate_judge`)."""
-        if self.judge == "rollout" and not (isinstance(predictor, LanePredictor) and predictor.ego):
-            raise GateError("the rollout judge needs the lane+interval predictor with an ego")
+        self.passage = bool(passage)
+        """Whether the ego drives a passage the rollout verified (:attr:`GateSettings.passage`)."""
+        rolls = "rollout judge" if self.judge == "rollout" else "verified passage" if passage else None
+        if rolls and not (isinstance(predictor, LanePredictor) and predictor.ego):
+            raise GateError(f"the {rolls} needs the lane+interval predictor with an ego")
         if not (isinstance(tolerance, (int, float)) and 0.0 <= tolerance < 1.0):
             raise GateError(f"tolerance must lie in [0, 1), got {tolerance!r}")
         self.tolerance = float(tolerance)
@@ -170,10 +173,6 @@ class JunctionGate:
             raise GateError(
                 f"the rollout judge judges no mode to keep a gate open, got keep_open={keep_open!r}"
             )
-        self.passage = bool(passage)
-        """Whether the ego drives a passage the rollout verified (:attr:`GateSettings.passage`)."""
-        if self.passage and not (isinstance(predictor, LanePredictor) and predictor.ego):
-            raise GateError("the verified passage needs the lane+interval predictor with an ego")
         self.verified_speed: float | None = None
         """This step's speed cap [m/s] of the passage the rollout verified, or None (not verified)."""
         self._rolled: Rollout | None = None
