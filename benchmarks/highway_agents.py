@@ -226,7 +226,15 @@ def body_overrides(args: argparse.Namespace) -> dict[str, Any]:
     return {f"{who}_{k}": v for who in ("ego", "object") for k, v in body.items()}
 
 
-INTERVAL_SWITCHES = ("split_yield", "centred", "fitted", "yield_to_ego", "ego_ahead", "upper_yields")
+INTERVAL_SWITCHES = (
+    "split_yield",
+    "centred",
+    "fitted",
+    "yield_to_ego",
+    "ego_ahead",
+    "upper_yields",
+    "reversing",
+)
 """The interval prediction's switches a benchmark's ``--interval`` may turn on
 (:class:`~risk_env.highway.lanes.interval.IntervalModel`'s bool fields of these names)."""
 
@@ -256,7 +264,9 @@ def add_interval_option(parser: argparse.ArgumentParser) -> None:
         " as far outside the arc as inside it),"
         " yield_to_ego (no box runs through a standing ego from one that follows it or yields to it),"
         " ego_ahead (the fast runs brake for the ego on every lane highway-env's connected search"
-        " covers), upper_yields (the fast runs obey the yielding rule, as the mean does)",
+        " covers), upper_yields (the fast runs obey the yielding rule, as the mean does),"
+        " reversing (a road user that may reverse is widened across: highway-env's lane keeping"
+        " steers the wrong way in reverse)",
     )
 
 

@@ -98,6 +98,7 @@ def mode_beliefs(
     margin_turn: float = 0.0,
     centred: bool = False,
     fitted: bool = False,
+    drift: tuple[float, float] | None = None,
 ) -> tuple[Belief, Stretch]:
     """The beliefs (fields ``(N+1,)``) of one mode, each in its own frame, and the stretch they hold.
 
@@ -113,7 +114,9 @@ def mode_beliefs(
     full acceleration, clipped to that full range; ``margin_turn`` [m] is added across where the
     route curves at the mean; ``centred``: the mean along the route at the middle of ``bounds``;
     ``fitted``: each box the tightest in its frame that holds the stretch, the mean at its centre
-    (else symmetric about the mean)."""
+    (else symmetric about the mean); ``drift``: ``(rate, cap)``, each box widened across by ``rate``
+    [m/m] per metre the road user may have reversed by then (its lowest speed's), up to ``cap`` [m]
+    (:attr:`~risk_env.highway.lanes.interval.IntervalModel.reversing`), or None."""
     steps = s.shape[1] - 1
     t = np.arange(steps + 1) * dt
     s_mean, v_mean = share @ s, share @ v
@@ -152,9 +155,11 @@ def mode_beliefs(
         mid_x, mid_y = (along.max(-1) + along.min(-1)) / 2, (side.max(-1) + side.min(-1)) / 2
     else:
         mid_x = mid_y = np.zeros(along.shape[:2])
-    turn = margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)  # (N+1,)
+    extra = margin_turn * (np.abs(route.curvature(s_mean)) > CURVED)  # (N+1,): added across
+    if drift is not None:
+        extra = extra + reverse_drift(v_lo, dt, *drift)
     half_x = np.abs(along - mid_x[..., None]).max(axis=-1)
-    half_y = np.abs(side - mid_y[..., None]).max(axis=-1) + spread.margin_across + turn[None, :]
+    half_y = np.abs(side - mid_y[..., None]).max(axis=-1) + spread.margin_across + extra[None, :]
     best = np.argmin(half_x * half_y, axis=0)  # (N+1,): the smaller box
     columns = np.arange(steps + 1)
     frame, half_x, half_y = candidates[best, columns], half_x[best, columns], half_y[best, columns]
@@ -173,7 +178,15 @@ def mode_beliefs(
     belief = lane_belief(
         mean[:, 0], mean[:, 1], heading, v_mean, sigma_x, sigma_y, sigma_v, half_x, half_y, v_lo, v_hi, frame
     )
-    return belief, Stretch(on_route, spread.margin_across + turn)
+    return belief, Stretch(on_route, spread.margin_across + extra)
+
+
+def reverse_drift(v_lo: np.ndarray, dt: float, rate: float, cap: float) -> np.ndarray:
+    """``(N+1,)``: how far [m] a road user whose lowest speeds are ``v_lo (N+1,)`` [m/s] may have
+    drifted sideways by each step, reversing: ``rate`` [m/m] per metre reversed (the lowest speed
+    of each step's two ends), up to ``cap`` [m]."""
+    back = np.maximum(-np.minimum(v_lo[:-1], v_lo[1:]), 0.0) * dt
+    return np.minimum(rate * np.concatenate([[0.0], np.cumsum(back)]), cap)
 
 
 def lane_belief(

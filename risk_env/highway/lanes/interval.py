@@ -108,6 +108,17 @@ class IntervalModel:
     behind the ego on its lane is then bounded behind an ego that stops, so that no box of it
     reaches through the ego, whatever the ego plans (when the ego drives on, that road user may
     pass its box, but behind the ego)."""
+    reversing: bool = False
+    """Whether a road user whose box reaches behind where it stands (it rolls backwards now, or a
+    run has it reverse: highway-env's IDM brakes through a stop when its leader is too close) is
+    widened across, on each side, by ``drift_rate`` per metre of that reach, up to ``drift_cap``:
+    highway-env's lane keeping steers the wrong way in reverse, so the car leaves its lane's
+    centreline and turns (in RMPC runs at the intersection, up to 1.5 m off within 1 to 4 m of
+    reversing, the heading up to 0.8 rad off the lane's)."""
+    drift_rate: float = 1.0
+    """Sideways drift [m] per metre reversed (``reversing``)."""
+    drift_cap: float = 1.5
+    """Largest sideways drift [m] of a reversing road user (``reversing``)."""
     ego_ahead: bool = False
     """Whether the runs whose leader search keeps to the road user's own lane (the fast ones) still
     take the ego for a leader on every lane highway-env's connected search covers (the lanes the
@@ -118,7 +129,7 @@ class IntervalModel:
         low, high = (float(x) for x in self.delta)
         if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
             raise ValueError(f"IntervalModel.delta must be finite with 0 < low <= high, got {self.delta!r}")
-        for name in ("margin_rate", "margin_turn"):
+        for name in ("margin_rate", "margin_turn", "drift_rate", "drift_cap"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"IntervalModel.{name} must be a finite number >= 0, got {value!r}")
@@ -131,6 +142,7 @@ class IntervalModel:
             "fitted",
             "yield_to_ego",
             "ego_ahead",
+            "reversing",
         )
         for name in switches:
             if not isinstance(getattr(self, name), bool):

@@ -71,6 +71,8 @@ def lane_mixture(
     modes from its routes' arc lengths and speeds ``(R, N+1)`` (and their interval bounds,
     :func:`~risk_env.highway.lanes.interval.interval_bounds`, or None)."""
     modes = []
+    iv = predictor.intervals
+    drift = (iv.drift_rate, iv.drift_cap) if bounds is not None and iv.reversing else None
     for group, label in zip(hyp.groups, hyp.labels, strict=True):
         w = hyp.weights[group]
         total = float(w.sum())
@@ -98,6 +100,7 @@ def lane_mixture(
                     0.0 if bounds is None else predictor.intervals.margin_turn,
                     predictor.intervals.centred,
                     predictor.intervals.fitted,
+                    drift,
                 )
                 name = label + suffix + ("" if predictor.pieces == 1 else f"#{j + 1}/{predictor.pieces}")
                 modes.append((total * part / predictor.pieces, beliefs, name, routes, stretch))

@@ -179,10 +179,15 @@ def roll_out(
             t = until * dt
             track = np.column_stack([x + v * t * math.cos(theta), y + v * t * math.sin(theta)])
             tracks.append((track, np.full(len(t), theta), f"road user {user} (off the road)"))
-        for track, heading, name in tracks:
-            near = np.flatnonzero(np.hypot(*(track - points[ego]).T) < length + width)
+        drift = np.zeros(len(tracks))  # both bodies widened by half of it: the pair's gap by all of it
+        iv = predictor.intervals
+        if iv.reversing:  # each road user's largest sideways drift in this run
+            back = np.maximum(s[others, 0] - s[others].min(axis=1), 0.0)
+            drift[: len(others)] = np.minimum(iv.drift_rate * back, iv.drift_cap)
+        for (track, heading, name), side in zip(tracks, drift, strict=True):
+            near = np.flatnonzero(np.hypot(*(track - points[ego]).T) < length + width + side)
             hit = rectangles_intersect(
-                track[near], heading[near], points[ego, near], pose[ego, near, 2], length, width
+                track[near], heading[near], points[ego, near], pose[ego, near, 2], length, width + side
             )
             if hit.any():
                 return Rollout(False, f"{run} run: {name} at {float(until[near[np.argmax(hit)]]) * dt:.2f} s")
