@@ -352,6 +352,12 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         help="the ego drives a passage the rollout verified, without the others' boxes (lane+interval)",
     )
     parser.add_argument(
+        "--gate-leader-cap",
+        action="store_true",
+        help="the reference and applied speeds are capped so that the approach braking stops the ego"
+        " behind the road user ahead on its route",
+    )
+    parser.add_argument(
         "--gate-approach-braking",
         type=cli.fraction,
         default=defaults.approach_braking,
@@ -378,4 +384,5 @@ def gate_settings(args: Any) -> Any:
         approach_braking=getattr(args, "gate_approach_braking", defaults.approach_braking),
         keep_open=getattr(args, "gate_keep_open", defaults.keep_open),
         passage=getattr(args, "gate_passage", defaults.passage),
+        leader_cap=getattr(args, "gate_leader_cap", defaults.leader_cap),
     )

@@ -64,7 +64,7 @@ from risk_env.highway.control import highway_action
 from risk_env.highway.gate import JunctionGate, check_gate, make_gate
 from risk_env.highway.idm import IDMEgo, reached
 from risk_env.highway.lane_agents import lane_agent, lane_scenario, prepare_route
-from risk_env.highway.lanes.follow import Leaders
+from risk_env.highway.lanes.follow import Leaders, leader_gap, leader_speed
 from risk_env.highway.lanes.routes import Route
 from risk_env.highway.predictors import HIGHWAY_PREDICTORS, highway_predictor
 from risk_env.highway.route import LaneIndex, RoutePath, lane_path
@@ -258,7 +258,7 @@ class IntersectionAdapter:
         progress = self.route.progress(self.lane, x, y)
         signals = turn_signals(base, observation)  # None unless the env observes them
         virtual = np.zeros((0, 5)) if self.gate is None else self.gate.step(progress, speed, others, signals)
-        if self._leader_route is not None:  # the gate's follow: road users ahead are followed
+        if self._leader_route is not None and self._gate_on.follow:  # road users ahead are followed
             corridor = scenario.path.corridor
             self._agent_predictor.leaders = Leaders(self._leader_route, (x, y), corridor)
         verified = self.gate is not None and self.gate.verified_speed is not None
@@ -268,8 +268,9 @@ class IntersectionAdapter:
         planned = np.vstack([virtual, self.last_objects])
         obs = layout.build((x, y, theta), (speed, self._omega), lam, error, planned, self.slots)
         agent = self._agent_for(self.lane)
+        cap = self._leader_speed(others, x, y)
         if self.gate is not None and hasattr(agent, "speed_limit"):
-            agent.speed_limit = self.gate.stop_speed()
+            agent.speed_limit = min(self.gate.stop_speed(), cap)
         action, _ = agent.predict(obs, episode_start=self._fresh or switched, deterministic=True)
         self._fresh = False
         self.last_observation = obs
@@ -279,10 +280,20 @@ class IntersectionAdapter:
         self.last_solves = [self._last_solve]
         v, omega = (float(a) for a in action)
         if self.gate is not None:
-            v = self.gate.allowed_speed(v)
+            v = min(self.gate.allowed_speed(v), cap)
         highway_action, self._steering = self.highway_action(v, omega, speed, self._steering)
         self._omega = omega
         return highway_action, None
+
+    def _leader_speed(self, others: np.ndarray, x: float, y: float) -> float:
+        """With the gate's ``leader_cap``, the speed [m/s] from which the approach braking stops the
+        ego at ``(x, y)`` behind the road user ahead on its route among ``others (m, 5)``
+        (:func:`~risk_env.highway.lanes.follow.leader_speed`); else inf."""
+        if self.gate is None or not self._gate_on.leader_cap or self._leader_route is None:
+            return math.inf
+        length = float(unwrapped_highway(self.env).vehicle.LENGTH)
+        gap = leader_gap(self._leader_route, (x, y), others, length)
+        return leader_speed(gap, self.gate.approach_braking * self.gate.accel)
 
     def highway_action(
         self, v: float, omega: float, speed: float, steering: float
@@ -306,7 +317,8 @@ class IntersectionAdapter:
             self._ready = True
         self.route = RoutePath.of_vehicle(base.road.network, vehicle, self.destination)
         follow = self.gate is not None and self._gate_on.follow and self._agent_predictor is not None
-        self._leader_route = Route(base.road.network, self.route.lanes) if follow else None
+        capped = self.gate is not None and self._gate_on.leader_cap
+        self._leader_route = Route(base.road.network, self.route.lanes) if follow or capped else None
         self.lane = 0
         if self.warm_up:
             args = (self.base_scenario, self.make_agent, self.slots, self._agent_predictor)

@@ -390,7 +390,9 @@ def make_gate(
     reach = ego.radius + obj.radius + max(map(abs, ego.disc_offsets)) + max(map(abs, obj.disc_offsets))
     length = float(unwrapped_highway(env).vehicle.LENGTH)
     options = dataclasses.asdict(settings)
-    clearance, _ = options.pop("clearance"), options.pop("follow")  # follow: the adapter's
+    clearance = options.pop("clearance")
+    for adapters in ("follow", "leader_cap"):  # the adapter's
+        options.pop(adapters)
     gate = JunctionGate(judge, reach, ego.accel_max, 0.5 * length, scenario.dt, **options)
     gate.clearance = min(gate.reach, checks.positive("GateSettings.clearance", clearance))
     gate.wrapper = None if predictor is None else GatePredictor(predictor)

@@ -127,6 +127,16 @@ class GateSettings:
     where it comes through in every run, the agents plan without the other road users, at no more
     than the runs' lowest speed one step on (:attr:`~risk_env.highway.gate.JunctionGate.verified_speed`),
     and else keep off every box as without it."""
+    leader_cap: bool = False
+    r"""Whether the agents' reference speed and the applied speed are capped at
+    $\sqrt{2 b a (g + v_l^2 / (2 a_l))}$, from which the approach braking $b a$
+    (:attr:`approach_braking`) stops the ego behind the nearest road user ahead on its route if
+    that one brakes fully ($a_l$) from its speed along the route $v_l \ge 0$ ($g$ [m]: the gap
+    between their bodies, less :data:`~risk_env.highway.lanes.follow.LEADER_MARGIN`): the stop
+    line's cap
+    (:attr:`slow_approach`, :attr:`hard_stop`) for the car ahead. The MPC's horizon has no
+    terminal row, so without it the ego comes on toward a queue at its reference speed until it
+    can no longer stop (:func:`~risk_env.highway.lanes.follow.leader_gap`)."""
 
 
 def check_gate(gate: Any) -> GateSettings | None:

@@ -30,6 +30,16 @@ LANE_HALF_WIDTH = 2.0
 highway-env's 4 m lane)."""
 
 
+LEADER_MARGIN = 2.0
+"""Room [m] a capped ego keeps between its body and a stopped leader's, which may still roll back
+(:func:`leader_gap`)."""
+
+
+LEADER_BRAKING = 6.0
+"""A leader's full braking [m/s²] (highway-env's ``IDMVehicle.ACC_MAX``, to which its IDM is
+clipped)."""
+
+
 @dataclass(frozen=True)
 class Leaders:
     """What :func:`follow_leaders` needs of the ego this step: its ``route``, its position
@@ -46,22 +56,63 @@ class Leaders:
         checks.positive("Leaders.corridor", self.corridor)
 
 
+def ahead_on_route(
+    route: Route, position: tuple[float, float], points: np.ndarray, headings: np.ndarray
+) -> np.ndarray:
+    """Whether each of ``points (..., 2)`` [m] heading ``headings (...)`` [rad] lies ahead of the ego
+    at ``position`` on its ``route``, within :data:`LANE_HALF_WIDTH` of the centreline and heading
+    within :data:`LEADER_CONE` of it: a leader's place (``(...)`` bool)."""
+    ego_s = float(route.locate_many(np.asarray(position, dtype=float))[0])
+    s, r = route.locate_many(np.asarray(points, dtype=float))
+    ahead = (s > ego_s) & (np.abs(r) <= LANE_HALF_WIDTH)
+    return ahead & (np.abs(wrap(np.asarray(headings, dtype=float) - route.heading(s))) <= LEADER_CONE)
+
+
+def leader_gap(
+    route: Route, position: tuple[float, float], rows: np.ndarray, length: float
+) -> tuple[float, float] | None:
+    """``(gap [m], speed [m/s])`` of the nearest road user measured as ``rows (m, 5)`` ahead of the
+    ego at ``position`` on its ``route`` (:func:`ahead_on_route`): the room between their bodies of
+    ``length`` [m] along the route less :data:`LEADER_MARGIN`, and its speed along the route (at
+    least 0); None when none is ahead."""
+    rows = np.asarray(rows, dtype=float).reshape(-1, 5)
+    if not len(rows):
+        return None
+    ahead = ahead_on_route(route, position, rows[:, :2], rows[:, 2])
+    if not ahead.any():
+        return None
+    ego_s = float(route.locate_many(np.asarray(position, dtype=float))[0])
+    s, _ = route.locate_many(rows[ahead, :2])
+    k = int(np.argmin(s))
+    along = rows[ahead, 3][k] * math.cos(float(wrap(rows[ahead, 2][k] - route.heading(s[k : k + 1])[0])))
+    return float(s[k]) - ego_s - length - LEADER_MARGIN, max(along, 0.0)
+
+
+def leader_speed(gap: tuple[float, float] | None, braking: float) -> float:
+    r"""$\sqrt{2 b (g + v_l^2 / (2 a_l))}$ [m/s]: the highest speed from which braking at ``braking``
+    $b$ [m/s²] stops the ego within ``gap`` $= (g, v_l)$ (:func:`leader_gap`; $g$ at least 0) plus
+    the distance its leader needs to stop from $v_l$ at highway-env's full braking $a_l$
+    (:data:`LEADER_BRAKING`); inf without a leader."""
+    if gap is None:
+        return math.inf
+    room, v_l = gap
+    return math.sqrt(2.0 * braking * (max(room, 0.0) + v_l**2 / (2.0 * LEADER_BRAKING)))
+
+
 def follow_leaders(mixtures: list[Mixture], leaders: Leaders) -> list[Mixture]:
     r"""``mixtures`` with each mode's truncation box widened across, $h_y \ge |r| + c$ ($r$: the
     mean's offset from the route, $c$: the corridor), at every stage $n \ge 1$ where its mean lies
     ahead of the ego on its route (within :data:`LANE_HALF_WIDTH` of the centreline, heading within
     :data:`LEADER_CONE` of it); every other stage and mode as it was."""
-    ego_s = float(leaders.route.locate_many(np.asarray(leaders.position, dtype=float))[0])
     out = []
     for mixture in mixtures:
         modes = []
         for mode in mixture.modes:
             b = mode.beliefs
             x, y = np.asarray(b.x, dtype=float), np.asarray(b.y, dtype=float)
-            s, r = leaders.route.locate_many(np.stack([x, y], axis=-1))
-            heading = leaders.route.heading(s)
-            ahead = (s > ego_s) & (np.abs(r) <= LANE_HALF_WIDTH)
-            ahead &= np.abs(wrap(np.asarray(b.theta, dtype=float) - heading)) <= LEADER_CONE
+            points = np.stack([x, y], axis=-1)
+            ahead = ahead_on_route(leaders.route, leaders.position, points, np.asarray(b.theta, dtype=float))
+            _, r = leaders.route.locate_many(points)
             ahead[0] = False  # n = 0: the measurement, which no row reads
             if ahead.any():
                 half_y = np.asarray(b.half_y, dtype=float)
