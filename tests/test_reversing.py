@@ -14,7 +14,7 @@ from risk_env.highway import LanePredictor, make_intersection_env  # noqa: E402
 from risk_env.highway.lanes.beliefs import reverse_drift  # noqa: E402
 from risk_env.highway.lanes.interval import IntervalModel  # noqa: E402
 from risk_env.highway.lanes.predictor import EgoPlan  # noqa: E402
-from risk_env.highway.lanes.rollout import roll_out  # noqa: E402
+from risk_env.highway.lanes.rollout import REVERSING, roll_out  # noqa: E402
 
 T = 0.5
 STEPS = 8
@@ -94,6 +94,27 @@ def test_the_rollout_widens_a_reversing_road_user_beside_the_egos_path(network):
     assert rolled(-6.0).through  # 3 m back: into the junction, where the ego turns
     fast = rolled(-6.0, reversing=True)
     assert not fast.through and "road user 0 (il0>o0)" in fast.reason
+
+
+def test_the_rollout_moves_a_road_user_rolling_back_on_at_its_speed_and_heading(network):
+    """A car in the ego's exit rolling back toward the junction: its lane's runs have it brake to a
+    stop at once (nobody is behind it), but highway-env's car may go on rolling back (a leader too
+    close keeps its IDM braking): with ``reversing`` it also moves on at its measured speed and
+    heading; below :data:`REVERSING` it does not."""
+    approach = network.get_lane(LEFT_TURN[0])
+    ego = measurement(network, LEFT_TURN[0], approach.length - 3.0, 0.0)
+    plan = EgoPlan(LEFT_TURN, 3.0, 8.0)
+
+    def rolled(speed, **switches):
+        car = measurement(network, LEFT_TURN[2], 15.0, speed)[None]
+        intervals = IntervalModel(split_yield=True, centred=True, **switches)
+        predictor = LanePredictor(network, T, longitudinal="interval", intervals=intervals, ego=lambda: ego)
+        return roll_out(predictor, car, plan)
+
+    assert rolled(-3.0).through
+    back = rolled(-3.0, reversing=True)
+    assert not back.through and "road user 0 (rolling back)" in back.reason
+    assert rolled(-0.9 * REVERSING, reversing=True).through
 
 
 @pytest.mark.parametrize(("name", "value"), [("drift_rate", -1.0), ("drift_cap", float("nan"))])

@@ -18,7 +18,9 @@ not take it there: :attr:`RolloutModel.waits`), and until then its body
 hypothesis of weight at least :attr:`RolloutModel.min_weight` (highway-env's rectangle test,
 :func:`~risk_env.highway.lanes.routes.rectangles_intersect`, on the positions between steps), nor
 a road user off the road (taking no part in the runs, it drives on at its speed and heading, as
-the paper's constant predictor has it).
+the paper's constant predictor has it). With the interval prediction's ``reversing``, a road user
+that may reverse is widened across by its drift, and one rolling back now (:data:`REVERSING`)
+also moves on at its speed and heading.
 Unlike the other judges, which take the ego through the junction at full acceleration whatever
 is in its way, this one lets every road user react to every other: a crossing car that brakes
 for an ego already in its lane, an ego that waits inside the junction for a car crossing ahead
@@ -37,6 +39,10 @@ from risk_env.highway.lanes.hypotheses import EgoPlan
 from risk_env.highway.lanes.routes import interpolate, rectangles_intersect
 from risk_env.highway.lanes.speed import stack_samples
 
+REVERSING = 0.5
+"""Speed [m/s] below minus which a road user counts as rolling back (:attr:`IntervalModel.reversing
+<risk_env.highway.lanes.interval.IntervalModel.reversing>`): highway-env's lane keeping steers it
+off its lanes, so the rollout also moves it on at its measured speed and heading."""
 RUNS = ("slow", "mean", "fast")
 """The runs, in the order they are tried (module docstring)."""
 
@@ -148,6 +154,8 @@ def roll_out(
     fade = np.exp(-tau * dt / traffic.lateral_time)
     others = np.flatnonzero(~scene.is_ego & (agents.weight >= model.min_weight))
     stray = [i for i, hyp in enumerate(scene.hypotheses[: scene.users]) if hyp is None]
+    if predictor.intervals.reversing:  # rolling back: also on at its speed and heading, off its lanes
+        stray += [i for i in range(scene.users) if scene.rows[i, 3] < -REVERSING and i not in stray]
     length, width = traffic.vehicle_length + 2 * model.clearance, traffic.vehicle_width + 2 * model.clearance
     speed = math.inf
     for run in RUNS:
@@ -174,11 +182,12 @@ def roll_out(
             (points[a], pose[a, :, 2], f"road user {agents.vehicle[a]} ({agents.routes[a].label()})")
             for a in others
         ]
-        for user in stray:  # off the road: at its speed and heading, as the paper's constant predictor
+        for user in stray:  # at its speed and heading, as the paper's constant predictor
             x, y, theta, v = scene.rows[user, :4]
             t = until * dt
             track = np.column_stack([x + v * t * math.cos(theta), y + v * t * math.sin(theta)])
-            tracks.append((track, np.full(len(t), theta), f"road user {user} (off the road)"))
+            why = "off the road" if scene.hypotheses[user] is None else "rolling back"
+            tracks.append((track, np.full(len(t), theta), f"road user {user} ({why})"))
         drift = np.zeros(len(tracks))  # both bodies widened by half of it: the pair's gap by all of it
         iv = predictor.intervals
         if iv.reversing:  # each road user's largest sideways drift in this run
