@@ -33,7 +33,9 @@ route weights (:attr:`~risk_env.highway.lanes.predictor.LaneMode.routes`, each r
 lie in the order of the vehicle's own route) against the route taken, at the prediction (empty
 for ``constant``); ``samples``, and ``fallbacks``, the predictions that fell back to the constant
 predictor (off the road). Vehicles that have crashed (at the prediction or at the scored step)
-are obstacles at rest, scored apart in the phase ``crashed`` (not in ``all``). ``prediction.md``
+are obstacles at rest, scored apart in the phase ``crashed`` (not in ``all``); the phase
+``reversing`` scores again the samples of ``all`` whose vehicle rolls back by the scored step
+(highway-env's IDM brakes through a stop when its leader is too close). ``prediction.md``
 holds the table at 1.5 s and 3 s, the command, and ``prediction.png``: both predictors' boxes
 (weights as opacity) at three moments of the first episode.
 """
@@ -93,9 +95,10 @@ def summarise(samples: dict[str, dict[str, np.ndarray]], dt: float) -> list[dict
     """The rows of ``prediction.csv`` (module docstring)."""
     rows = []
     for name, s in samples.items():
-        for phase in PHASES:
-            if phase == "all":
+        for phase in (*PHASES, "reversing"):
+            if phase in ("all", "reversing"):
                 chosen = s["phase"] != PHASES.index("crashed")
+                chosen = chosen & s["reversing"] if phase == "reversing" else chosen
             else:
                 chosen = s["phase"] == PHASES.index(phase)
             for n in range(1, STEPS + 1):

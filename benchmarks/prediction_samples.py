@@ -9,9 +9,12 @@ import numpy as np
 
 PHASES = ("all", "approach", "junction", "exit", "crashed")
 """The phases of a vehicle's path the benchmark reports (``all``: the first three)."""
+ROLLING_BACK = -0.05
+"""Speed [m/s] below which a vehicle rolls back: a sample is also scored in the phase
+``reversing`` when its vehicle does at the prediction or at any step up to the scored one."""
 STEPS = 6
 """Prediction steps scored (3 s at T = 0.5 s)."""
-KEYS = ("phase", "n", "err", "covered", "area", "chebyshev", "brier", "fallback")
+KEYS = ("phase", "n", "err", "covered", "area", "chebyshev", "brier", "fallback", "reversing")
 """The columns of the scored samples (:func:`score_episode`)."""
 
 
@@ -99,7 +102,8 @@ def score_episode(
     steps: list[dict[str, Any]], predictors: dict[str, Any], threshold: float
 ) -> dict[str, np.ndarray]:
     """Per predictor, the scored samples of one recorded episode: columns ``phase`` (index into
-    :data:`PHASES`), ``n``, ``err``, ``covered``, ``area``, ``chebyshev``, ``brier``, ``fallback``."""
+    :data:`PHASES`), ``n``, ``err``, ``covered``, ``area``, ``chebyshev``, ``brier``, ``fallback``,
+    ``reversing`` (the vehicle rolls back by then, :data:`ROLLING_BACK`)."""
     from risk_env.highway.lanes.predictor import LaneMode
 
     out: dict[str, list[tuple]] = {name: [] for name in predictors}
@@ -119,10 +123,12 @@ def score_episode(
                 fallback = name != "constant" and not isinstance(best, LaneMode)
                 score = brier(mixture, taken[vid]) if name != "constant" else float("nan")
                 phase = PHASES.index(phase_of(step["lane"][k]))
+                rolled = step["m"][k, 3] < ROLLING_BACK
                 for n in range(1, STEPS + 1):
                     if t + n >= len(steps) or vid not in where[t + n]:
-                        continue
+                        break
                     j = where[t + n][vid]
+                    rolled = rolled or steps[t + n]["m"][j, 3] < ROLLING_BACK
                     truth = steps[t + n]["m"][j, :2]
                     crashed = bool(step["crashed"][k] or steps[t + n]["crashed"][j])
                     mean = np.array([float(best.beliefs.x[n]), float(best.beliefs.y[n])])
@@ -137,11 +143,11 @@ def score_episode(
                             float(np.max(np.abs(truth - mean))),
                             score,
                             fallback,
+                            bool(rolled),
                         )
                     )
-    keys = ("phase", "n", "err", "covered", "area", "chebyshev", "brier", "fallback")
     return {
-        name: {key: np.array([row[i] for row in rows]) for i, key in enumerate(keys)} if rows else {}
+        name: {key: np.array([row[i] for row in rows]) for i, key in enumerate(KEYS)} if rows else {}
         for name, rows in out.items()
     }
 

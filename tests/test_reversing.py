@@ -123,3 +123,35 @@ def test_bad_drift_numbers_are_named(name, value):
         IntervalModel(**{name: value})
     with pytest.raises(TypeError, match="IntervalModel.reversing"):
         IntervalModel(reversing=1)
+
+
+def test_the_prediction_benchmark_scores_the_samples_of_a_car_rolling_back_again():
+    """Four steps of a car on the exit beside the ego's approach: it drives away, stops, rolls back;
+    a sample is ``reversing`` when the car rolls back at the prediction or by the scored step, and
+    the phase ``reversing`` scores those samples again (``all`` keeps every one)."""
+    from benchmarks import prediction as bench
+    from benchmarks import prediction_samples as samples
+    from risk_env.prediction import ConstantPredictor
+    from risk_env.scenario.scenario import Scenario
+
+    speeds = [2.0, 0.0, -1.0, -2.0]
+    steps = [
+        {
+            "ids": [1, 2],
+            "ego": [True, False],
+            "m": np.array([[2.0, 40.0, -np.pi / 2, 0.0, 0.0], [-2.0, 20.0 + 0.5 * t, np.pi / 2, v, 0.0]]),
+            "lane": [("o0", "ir0", 0), EXIT_BESIDE],
+            "crashed": np.array([False, False]),
+            "signal": np.zeros((2, 2)),
+            "route": [("o0", "ir0", "il1", "o1"), ("il0", "o0")],
+        }
+        for t, v in enumerate(speeds)
+    ]
+    scored = samples.score_episode(steps, {"constant": ConstantPredictor(Scenario.preset("low"))}, 0.05)
+    s = scored["constant"]
+    # predictions at t = 0, 1, 2 scored 1..3 steps on: (t, n) -> rolls back by t + n
+    expected = [t + n >= 2 for t in range(3) for n in range(1, 4 - t)]
+    assert s["reversing"].tolist() == expected
+    rows = bench.summarise(scored, T)
+    count = {r["phase"]: sum(q["samples"] for q in rows if q["phase"] == r["phase"]) for r in rows}
+    assert count["reversing"] == sum(expected) and count["all"] == len(expected)
