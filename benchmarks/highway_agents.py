@@ -352,14 +352,6 @@ def add_gate_options(parser: argparse.ArgumentParser) -> None:
         help="the ego drives a passage the rollout verified, without the others' boxes (lane+interval)",
     )
     parser.add_argument(
-        "--gate-wait-back",
-        type=cli.nonnegative_float,
-        default=defaults.wait_back,
-        metavar="M",
-        help="how much farther [m] before the junction than its line a closed gate holds the ego"
-        f" (default {defaults.wait_back:g})",
-    )
-    parser.add_argument(
         "--gate-leader-cap",
         action="store_true",
         help="the reference and applied speeds are capped so that the approach braking stops the ego"
@@ -393,5 +385,4 @@ def gate_settings(args: Any) -> Any:
         keep_open=getattr(args, "gate_keep_open", defaults.keep_open),
         passage=getattr(args, "gate_passage", defaults.passage),
         leader_cap=getattr(args, "gate_leader_cap", defaults.leader_cap),
-        wait_back=getattr(args, "gate_wait_back", defaults.wait_back),
     )

@@ -443,32 +443,3 @@ def test_the_adapter_applies_the_hard_stops_speed():
     assert gate_settings(highway_intersection.parse_args([])).approach_braking == 0.5
     args = highway_intersection.parse_args(["--gate-hard-stop", "--gate-approach-braking", "1"])
     assert gate_settings(args).approach_braking == 1.0
-
-
-def test_a_closed_gate_holds_the_ego_farther_back_by_wait_back():
-    near = gate()
-    assert near.decide(30.0, 5.0, crossing_at(60.0, -30.0, 10.0)).closed
-    back = gate()
-    back.wait_back = 10.0
-    assert back.decide(30.0, 5.0, crossing_at(60.0, -30.0, 10.0)).closed
-    assert back.virtual()[0] == pytest.approx(near.virtual()[0] - 10.0)
-    # an ego already past the farther line is held where it is, as at the line itself
-    held = gate()
-    held.wait_back = 10.0
-    assert held.decide(44.0, 0.0, crossing_at(60.0, -30.0, 10.0)).closed
-    assert held.virtual()[0] == pytest.approx(44.0 + 4.0 + VIRTUAL_HALF + HOLD_GAP)
-
-
-def test_wait_back_is_a_gate_setting_and_a_bad_one_is_named():
-    pytest.importorskip("highway_env")
-    from risk_env.highway import make_intersection_env
-    from risk_env.highway.gate import make_gate
-    from risk_env.highway.gate_judge import GateSettings
-
-    env = make_intersection_env()
-    env.reset(seed=0)
-    scenario = Scenario.preset("low")
-    g, _ = make_gate(GateSettings(wait_back=7.5), Crossing(), scenario, env)
-    assert g.wait_back == 7.5 and make_gate(True, Crossing(), scenario, env)[0].wait_back == 0.0
-    with pytest.raises(ValueError, match="GateSettings.wait_back"):
-        make_gate(GateSettings(wait_back=-1.0), Crossing(), scenario, env)

@@ -121,5 +121,3 @@ def test_the_cap_is_a_gate_setting_of_the_benchmark():
     args = highway_intersection.parse_args(["--gate-leader-cap"])
     assert gate_settings(args) == GateSettings(leader_cap=True)
     assert gate_settings(highway_intersection.parse_args([])) == GateSettings()
-    args = highway_intersection.parse_args(["--gate-wait-back", "7.5"])
-    assert gate_settings(args) == GateSettings(wait_back=7.5)

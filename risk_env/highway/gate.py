@@ -189,8 +189,6 @@ class JunctionGate:
         self.clearance = min(self.reach, GATE_CLEARANCE)
         """Distance [m] from the ego's path within which a vehicle is in conflict (and past which
         the ego's centre has cleared a point)."""
-        self.wait_back = 0.0
-        """How much farther [m] before the line a closed gate holds the ego (GateSettings.wait_back)."""
         self.route: RoutePath | None = None
         self.span: tuple[float, float] | None = None
         self.committed = False
@@ -309,7 +307,7 @@ class JunctionGate:
 
     def _line(self) -> float:
         """Route arc length [m] of the virtual object."""
-        return self.span[0] - self.half_length + self.reach - LINE_BUFFER - self.wait_back
+        return self.span[0] - self.half_length + self.reach - LINE_BUFFER
 
     def refund(self, agent: Any, report: Any) -> float:
         """Give back to ``agent`` (an SMPC with a budget) the risk its last step (``report``) charged for
@@ -392,11 +390,10 @@ def make_gate(
     reach = ego.radius + obj.radius + max(map(abs, ego.disc_offsets)) + max(map(abs, obj.disc_offsets))
     length = float(unwrapped_highway(env).vehicle.LENGTH)
     options = dataclasses.asdict(settings)
-    clearance, wait_back = options.pop("clearance"), options.pop("wait_back")
+    clearance = options.pop("clearance")
     for adapters in ("follow", "leader_cap"):  # the adapter's
         options.pop(adapters)
     gate = JunctionGate(judge, reach, ego.accel_max, 0.5 * length, scenario.dt, **options)
     gate.clearance = min(gate.reach, checks.positive("GateSettings.clearance", clearance))
-    gate.wait_back = checks.positive("GateSettings.wait_back", wait_back, strict=False)
     gate.wrapper = None if predictor is None else GatePredictor(predictor)
     return gate, gate.wrapper

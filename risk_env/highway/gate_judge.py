@@ -127,11 +127,6 @@ class GateSettings:
     where it comes through in every run, the agents plan without the other road users, at no more
     than the runs' lowest speed one step on (:attr:`~risk_env.highway.gate.JunctionGate.verified_speed`),
     and else keep off every box as without it."""
-    wait_back: float = 0.0
-    """How much farther [m] before the junction than its line a closed gate holds the ego (>= 0).
-    highway-env's lane graph continues each exit into the approach beside it, so its drivers on
-    that exit take the last vehicle on the approach for their leader and stop about 10 m short of
-    it: an ego held at the line stops them inside the junction."""
     leader_cap: bool = False
     r"""Whether the agents' reference speed and the applied speed are capped at
     $\sqrt{2 b a (g + v_l^2 / (2 a_l))}$, from which the approach braking $b a$
