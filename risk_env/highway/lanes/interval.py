@@ -113,8 +113,7 @@ class IntervalModel:
     run has it reverse: highway-env's IDM brakes through a stop when its leader is too close) is
     widened across, on each side, by ``drift_rate`` per metre of that reach, up to ``drift_cap``:
     highway-env's lane keeping steers the wrong way in reverse, so the car leaves its lane's
-    centreline and turns (in RMPC runs at the intersection, up to 1.5 m off within 1 to 4 m of
-    reversing, the heading up to 0.8 rad off the lane's)."""
+    centreline and turns (the prediction benchmark's phase ``reversing`` scores such cars)."""
     drift_rate: float = 1.0
     """Sideways drift [m] per metre reversed (``reversing``)."""
     drift_cap: float = 1.5
