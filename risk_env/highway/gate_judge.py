@@ -133,10 +133,9 @@ class GateSettings:
     (:attr:`approach_braking`) stops the ego behind the nearest road user ahead on its route if
     that one brakes fully ($a_l$) from its speed along the route $v_l \ge 0$ ($g$ [m]: the gap
     between their bodies, less :data:`~risk_env.highway.lanes.follow.LEADER_MARGIN`): the stop
-    line's cap
-    (:attr:`slow_approach`, :attr:`hard_stop`) for the car ahead. The MPC's horizon has no
-    terminal row, so without it the ego comes on toward a queue at its reference speed until it
-    can no longer stop (:func:`~risk_env.highway.lanes.follow.leader_gap`)."""
+    line's cap (:attr:`slow_approach`, :attr:`hard_stop`) for the car ahead. The MPC's horizon
+    has no terminal row, so without it the ego comes on toward a queue at its reference speed
+    until it can no longer stop (:func:`~risk_env.highway.lanes.follow.leader_gap`)."""
 
 
 def check_gate(gate: Any) -> GateSettings | None:

@@ -109,9 +109,9 @@ class IntervalModel:
     reaches through the ego, whatever the ego plans (when the ego drives on, that road user may
     pass its box, but behind the ego)."""
     reversing: bool = False
-    """Whether a road user whose box reaches behind where it stands (it rolls backwards now, or a
-    run has it reverse: highway-env's IDM brakes through a stop when its leader is too close) is
-    widened across, on each side, by ``drift_rate`` per metre of that reach, up to ``drift_cap``:
+    """Whether a road user whose lowest speeds go below zero (it rolls back now, or a run has it
+    reverse: highway-env's IDM brakes through a stop when its leader is too close) is widened
+    across, on each side, by ``drift_rate`` per metre they take it back, up to ``drift_cap``:
     highway-env's lane keeping steers the wrong way in reverse, so the car leaves its lane's
     centreline and turns (the prediction benchmark's phase ``reversing`` scores such cars)."""
     drift_rate: float = 1.0
