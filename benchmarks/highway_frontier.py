@@ -103,6 +103,10 @@ def _style(s: dict[str, Any]) -> tuple[str, str, float | None]:
     return f"SMPC {s['agent'].removeprefix('smpc:').removeprefix('exact:')}{note}", "D", None
 
 
+VARIANT_EDGES = ("black", "tab:purple", "tab:red", "tab:olive")
+"""The edge colours of labelled runs' points, one per label in the order the runs are given."""
+
+
 def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path:
     """``path`` (PNG): goal rate against collision rate of every summary row, with Wilson
     intervals (see the module docstring for the marks)."""
@@ -111,7 +115,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 6.0))
+    fig, ax = plt.subplots(figsize=(10.5, 6.0))
     idm = next((s for s in summary if s["agent"] == "idm"), None)
     if idm is not None:
         c, g = 100 * idm["collision_rate"], 100 * idm["goal_rate"]
@@ -120,6 +124,8 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
         )
     curves: dict[str, list[tuple[float, float, float]]] = {}
     tags: dict[tuple[float, float], list[float]] = {}
+    labels = list(dict.fromkeys(s["variant"] for s in summary if s.get("variant")))
+    edges = {label: VARIANT_EDGES[i % len(VARIANT_EDGES)] for i, label in enumerate(labels)}
     for s in summary:
         kind = s["agent"].split(":")[0]
         label, marker, budget = _style(s)
@@ -140,7 +146,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
             fillstyle=PREDICTOR_FILL.get(family(s["predictor"]), "left") if s["predictor"] else "full",
             markerfacecoloralt="white",
             mew=1.6,
-            mec="black" if s.get("variant") else colour,  # a labelled run's agent: edged
+            mec=edges.get(s.get("variant", ""), colour),  # a labelled run's agent: edged, a colour per label
             label=label,
         )
     for (pred, _), points in curves.items():
@@ -153,7 +159,7 @@ def draw_frontier(summary: list[dict[str, Any]], path: Path, title: str) -> Path
         ax.annotate(text, (x, y), textcoords="offset points", xytext=(6, 4 if i % 2 else -11), fontsize=8)
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=True))
-    ax.legend(unique.values(), unique.keys(), fontsize=8, loc="upper right")
+    ax.legend(unique.values(), unique.keys(), fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_xlabel("collision rate [%] (Wilson 95 % interval)")
     ax.set_ylabel("goal rate [%] (Wilson 95 % interval)")
     ax.set_xlim(left=-2)
