@@ -402,7 +402,7 @@ def test_the_frontier_from_a_tiny_run(tmp_path):
     for name in highway_frontier.FILES:
         assert (tmp_path / name).stat().st_size > 0
     with Image.open(tmp_path / "frontier.png") as image:
-        assert image.size == (900, 720)
+        assert image.size == (1260, 720)  # the legend beside the plot
     assert "- `rmpc:worst_case (constant)`: " in (tmp_path / "frontier.md").read_text()
     assert (tmp_path / "frontier.manifest.json").exists()
 
