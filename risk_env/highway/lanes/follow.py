@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -56,16 +57,32 @@ class Leaders:
         checks.positive("Leaders.corridor", self.corridor)
 
 
-def ahead_on_route(
-    route: Route, position: tuple[float, float], points: np.ndarray, headings: np.ndarray
-) -> np.ndarray:
-    """Whether each of ``points (..., 2)`` [m] heading ``headings (...)`` [rad] lies ahead of the ego
-    at ``position`` on its ``route``, within :data:`LANE_HALF_WIDTH` of the centreline and heading
-    within :data:`LEADER_CONE` of it: a leader's place (``(...)`` bool)."""
-    ego_s = float(route.locate_many(np.asarray(position, dtype=float))[0])
+class OnRoute(NamedTuple):
+    """Where points lie on the ego's route (:func:`ahead_on_route`), each field ``(...)``."""
+
+    ahead: np.ndarray
+    """Whether each is a leader's place: ahead of the ego, within :data:`LANE_HALF_WIDTH` of the
+    centreline and heading within :data:`LEADER_CONE` of it (bool)."""
+    along: np.ndarray
+    """Its arc length less the ego's [m]."""
+    offset: np.ndarray
+    """Its offset from the centreline [m]."""
+    turn: np.ndarray
+    """Its heading less the route's there [rad], wrapped."""
+
+
+def ahead_on_route(route: Route, ego_s: float, points: np.ndarray, headings: np.ndarray) -> OnRoute:
+    """Where ``points (..., 2)`` [m] heading ``headings (...)`` [rad] lie on the ego's ``route``, the
+    ego at arc length ``ego_s`` [m] (:class:`OnRoute`)."""
     s, r = route.locate_many(np.asarray(points, dtype=float))
-    ahead = (s > ego_s) & (np.abs(r) <= LANE_HALF_WIDTH)
-    return ahead & (np.abs(wrap(np.asarray(headings, dtype=float) - route.heading(s))) <= LEADER_CONE)
+    turn = wrap(np.asarray(headings, dtype=float) - route.heading(s))
+    ahead = (s > ego_s) & (np.abs(r) <= LANE_HALF_WIDTH) & (np.abs(turn) <= LEADER_CONE)
+    return OnRoute(ahead, s - ego_s, r, turn)
+
+
+def ego_arc(route: Route, position: tuple[float, float]) -> float:
+    """The arc length [m] of the ego at ``position`` on its ``route``."""
+    return float(route.locate_many(np.asarray(position, dtype=float))[0])
 
 
 def leader_gap(
@@ -78,14 +95,12 @@ def leader_gap(
     rows = np.asarray(rows, dtype=float).reshape(-1, 5)
     if not len(rows):
         return None
-    ahead = ahead_on_route(route, position, rows[:, :2], rows[:, 2])
-    if not ahead.any():
+    place = ahead_on_route(route, ego_arc(route, position), rows[:, :2], rows[:, 2])
+    if not place.ahead.any():
         return None
-    ego_s = float(route.locate_many(np.asarray(position, dtype=float))[0])
-    s, _ = route.locate_many(rows[ahead, :2])
-    k = int(np.argmin(s))
-    along = rows[ahead, 3][k] * math.cos(float(wrap(rows[ahead, 2][k] - route.heading(s[k : k + 1])[0])))
-    return float(s[k]) - ego_s - length - LEADER_MARGIN, max(along, 0.0)
+    k = np.flatnonzero(place.ahead)[int(np.argmin(place.along[place.ahead]))]
+    along = rows[k, 3] * math.cos(float(place.turn[k]))
+    return float(place.along[k]) - length - LEADER_MARGIN, max(along, 0.0)
 
 
 def leader_speed(gap: tuple[float, float] | None, braking: float) -> float:
@@ -104,15 +119,17 @@ def follow_leaders(mixtures: list[Mixture], leaders: Leaders) -> list[Mixture]:
     mean's offset from the route, $c$: the corridor), at every stage $n \ge 1$ where its mean lies
     ahead of the ego on its route (within :data:`LANE_HALF_WIDTH` of the centreline, heading within
     :data:`LEADER_CONE` of it); every other stage and mode as it was."""
+    ego_s = ego_arc(leaders.route, leaders.position)
     out = []
     for mixture in mixtures:
         modes = []
         for mode in mixture.modes:
             b = mode.beliefs
             x, y = np.asarray(b.x, dtype=float), np.asarray(b.y, dtype=float)
-            points = np.stack([x, y], axis=-1)
-            ahead = ahead_on_route(leaders.route, leaders.position, points, np.asarray(b.theta, dtype=float))
-            _, r = leaders.route.locate_many(points)
+            place = ahead_on_route(
+                leaders.route, ego_s, np.stack([x, y], axis=-1), np.asarray(b.theta, dtype=float)
+            )
+            ahead, r = place.ahead, place.offset
             ahead[0] = False  # n = 0: the measurement, which no row reads
             if ahead.any():
                 half_y = np.asarray(b.half_y, dtype=float)
