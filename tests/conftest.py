@@ -77,3 +77,14 @@ def pytest_sessionfinish(session):
     """The run is over: pytest's last garbage collections (five of them, to report exceptions in
     finalizers) need not walk the whole heap of the test process again."""
     gc.freeze()
+
+
+@pytest.fixture(scope="session")
+def network():
+    """``intersection-v2``'s road network (after a reset with seed 0); skips without highway-env."""
+    pytest.importorskip("highway_env")
+    from risk_env.highway import make_intersection_env
+
+    env = make_intersection_env()
+    env.reset(seed=0)
+    return env.unwrapped.road.network

@@ -10,6 +10,7 @@ import pytest
 pytest.importorskip("highway_env")
 
 from highway_env.road.road import RoadNetwork  # noqa: E402
+from highway_helpers import LEFT_TURN, measurement  # noqa: E402
 
 from risk_env.highway import LanePredictor, make_intersection_env  # noqa: E402
 from risk_env.highway.gate import GateError, JunctionGate, junction_span  # noqa: E402
@@ -23,21 +24,6 @@ from risk_env.prediction.predictors import ConstantPredictor  # noqa: E402
 from risk_env.scenario.scenario import Scenario  # noqa: E402
 
 T = 0.5
-LEFT_TURN = (("o0", "ir0", 0), ("ir0", "il1", 0), ("il1", "o1", 0))
-"""``intersection-v2``'s ego route."""
-
-
-@pytest.fixture(scope="module")
-def network():
-    env = make_intersection_env()
-    env.reset(seed=0)
-    return env.unwrapped.road.network
-
-
-def measurement(network, lane_index, s, speed):
-    lane = network.get_lane(lane_index)
-    x, y = lane.position(s, 0.0)
-    return np.array([x, y, lane.heading_at(s), speed, 0.0])
 
 
 def predictor_at_the_line(network):

@@ -18,7 +18,7 @@ from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
 
 from benchmarks import prediction as bench  # noqa: E402
 from benchmarks import prediction_samples as samples  # noqa: E402
-from risk_env.highway import LaneMode, LanePredictor, make_intersection_env, vehicle_measurement  # noqa: E402
+from risk_env.highway import LaneMode, LanePredictor, vehicle_measurement  # noqa: E402
 from risk_env.highway.lanes.beliefs import Spread  # noqa: E402
 from risk_env.highway.lanes.routes import (  # noqa: E402
     Route,
@@ -37,13 +37,6 @@ from risk_env.scenario.scenario import Scenario  # noqa: E402
 
 T = 0.5
 STEPS = 6
-
-
-@pytest.fixture(scope="module")
-def network():
-    env = make_intersection_env()
-    env.reset(seed=0)
-    return env.unwrapped.road.network
 
 
 @pytest.fixture(scope="module")

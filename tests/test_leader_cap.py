@@ -11,6 +11,8 @@ import pytest
 
 pytest.importorskip("highway_env")
 
+from highway_helpers import LEFT_TURN, measurement  # noqa: E402
+
 from risk_env.highway import IntersectionAdapter, make_intersection_env  # noqa: E402
 from risk_env.highway.gate_judge import GateSettings  # noqa: E402
 from risk_env.highway.lanes.follow import (  # noqa: E402
@@ -21,21 +23,7 @@ from risk_env.highway.lanes.follow import (  # noqa: E402
 )
 from risk_env.highway.lanes.routes import Route  # noqa: E402
 
-LEFT_TURN = (("o0", "ir0", 0), ("ir0", "il1", 0), ("il1", "o1", 0))
 LENGTH = 5.0
-
-
-@pytest.fixture(scope="module")
-def network():
-    env = make_intersection_env()
-    env.reset(seed=0)
-    return env.unwrapped.road.network
-
-
-def measurement(network, lane_index, s, speed, turn=0.0):
-    lane = network.get_lane(lane_index)
-    x, y = lane.position(s, 0.0)
-    return np.array([x, y, lane.heading_at(s) + turn, speed, 0.0])
 
 
 def test_the_gap_is_to_the_nearest_road_user_ahead_on_the_route(network):

@@ -10,7 +10,9 @@ import pytest
 
 pytest.importorskip("highway_env")
 
-from risk_env.highway import LanePredictor, make_intersection_env  # noqa: E402
+from highway_helpers import LEFT_TURN, measurement  # noqa: E402
+
+from risk_env.highway import LanePredictor  # noqa: E402
 from risk_env.highway.lanes.beliefs import reverse_drift  # noqa: E402
 from risk_env.highway.lanes.interval import IntervalModel  # noqa: E402
 from risk_env.highway.lanes.predictor import EgoPlan  # noqa: E402
@@ -18,23 +20,9 @@ from risk_env.highway.lanes.rollout import REVERSING, roll_out  # noqa: E402
 
 T = 0.5
 STEPS = 8
-LEFT_TURN = (("o0", "ir0", 0), ("ir0", "il1", 0), ("il1", "o1", 0))
 EXIT_BESIDE = ("il0", "o0", 0)
 """The exit lane beside the ego's approach, driven the other way."""
 SWITCHES = {"split_yield": True, "centred": True, "fitted": True}
-
-
-@pytest.fixture(scope="module")
-def network():
-    env = make_intersection_env()
-    env.reset(seed=0)
-    return env.unwrapped.road.network
-
-
-def measurement(network, lane_index, s, speed):
-    lane = network.get_lane(lane_index)
-    x, y = lane.position(s, 0.0)
-    return np.array([x, y, lane.heading_at(s), speed, 0.0])
 
 
 def test_the_drift_grows_with_the_distance_reversed_up_to_its_cap():

@@ -12,8 +12,9 @@ import pytest
 pytest.importorskip("highway_env")
 
 from highway_env.road.road import RoadNetwork  # noqa: E402
+from highway_helpers import measurement  # noqa: E402
 
-from risk_env.highway import LanePredictor, make_intersection_env  # noqa: E402
+from risk_env.highway import LanePredictor  # noqa: E402
 from risk_env.highway.gate import JunctionGate, junction_span  # noqa: E402
 from risk_env.highway.lanes.interval import IntervalModel  # noqa: E402
 from risk_env.highway.lanes.predictor import EgoPlan  # noqa: E402
@@ -23,13 +24,6 @@ from risk_env.highway.route import RoutePath  # noqa: E402
 
 T = 0.5
 STEPS = 6
-
-
-@pytest.fixture(scope="module")
-def network():
-    env = make_intersection_env()
-    env.reset(seed=0)
-    return env.unwrapped.road.network
 
 
 def route(network, *nodes: str) -> Route:
@@ -75,12 +69,6 @@ def test_the_chance_of_yielding_is_the_mass_of_the_routes_yielded_to(network):
     )
     alone = chance_of(network, [0, 1], [vertical, opposite], [1, 1], [88, 88])[0]
     assert alone == 1.0 and two[0] == pytest.approx(1 - 0.5 * 0.5)
-
-
-def measurement(network, lane_index, s, speed):
-    lane = network.get_lane(lane_index)
-    x, y = lane.position(s, 0.0)
-    return np.array([x, y, lane.heading_at(s), speed, 0.0])
 
 
 def along(belief, n, heading):
